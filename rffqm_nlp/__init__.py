@@ -1,0 +1,29 @@
+"""rffqm-nlp: forward and inverse design of rigidly and flat-foldable quadrilateral mesh origami.
+
+After Feng, Dang, James & Plucinsky, J. Mech. Phys. Solids (2020), doi 10.1016/j.jmps.2020.104018.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from .boundary import BoundaryData, miura_boundary, perturb_angles
+from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
+                     RffqmError, SolverFailed, SurfaceError)
+from .pattern import Pattern
+
+__version__ = "0.1.0"
+
+_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "surfaces", "shape", "design",
+               "results", "io", "viz", "cli")
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
+
+
+__all__ = ["BoundaryData", "BoundaryDataError", "InfeasibleDesign", "InputError",
+           "MarchingError", "Pattern", "RffqmError", "SolverFailed", "SurfaceError",
+           "miura_boundary", "perturb_angles", *_SUBMODULES]

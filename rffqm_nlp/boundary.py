@@ -1,0 +1,214 @@
+"""Boundary data of the marching algorithm (eq:inputMarching), Miura-ori data, perturbations.
+
+Vertex (i, j) is 1-based as in the paper; every vertex carries its a-role triple
+(alpha, beta, sigma): alpha is the sector angle of its upper-right panel, beta that of its
+upper-left panel, sigma its mountain-valley sign (PAPER_NOTES s.1).
+
+Boundary data:
+
+* ``left``     (N+1, 3): (alpha, beta, sigma) of the left vertices (i, 1), i = 1..N+1;
+* ``bottom``   (M, 3):   (alpha, beta, sigma) of the bottom vertices (1, j), j = 2..M+1;
+* ``l_left``   (N,):     l_ab of the panels (i, 1), i.e. the left side lengths;
+* ``l_bottom`` (M,):     l_ac of the panels (1, j), i.e. the bottom side lengths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from .errors import BoundaryDataError, InputError
+
+Layout = Literal["zigzag_j", "zigzag_i"]
+LAYOUTS: tuple[str, ...] = ("zigzag_j", "zigzag_i")
+
+#: |cos(beta) - sigma cos(alpha)| below this means sigma is not in MV(alpha, beta).
+MV_TOL = 1e-10
+
+
+def mv_set(alpha: float, beta: float, tol: float = MV_TOL) -> tuple[int, ...]:
+    """The admissible mountain-valley signs MV(alpha, beta) of Theorem 2.1 (eq:foldParams)."""
+    return tuple(s for s in (1, -1) if abs(np.cos(beta) - s * np.cos(alpha)) > tol)
+
+
+@dataclass(frozen=True)
+class BoundaryData:
+    """Input data of the marching algorithm (eq:inputMarching), validated on construction."""
+
+    left: np.ndarray
+    bottom: np.ndarray
+    l_left: np.ndarray
+    l_bottom: np.ndarray
+
+    def __post_init__(self) -> None:
+        left = _as_float_array(self.left, "left")
+        bottom = _as_float_array(self.bottom, "bottom")
+        l_left = _as_float_array(self.l_left, "l_left")
+        l_bottom = _as_float_array(self.l_bottom, "l_bottom")
+        if left.ndim != 2 or left.shape[1] != 3 or left.shape[0] < 2:
+            raise InputError(f"left must have shape (N+1, 3) with N >= 1, got {left.shape}")
+        if bottom.ndim != 2 or bottom.shape[1] != 3 or bottom.shape[0] < 1:
+            raise InputError(f"bottom must have shape (M, 3) with M >= 1, got {bottom.shape}")
+        n, m = left.shape[0] - 1, bottom.shape[0]
+        if l_left.shape != (n,):
+            raise InputError(f"l_left must have shape (N,) = ({n},), got {l_left.shape}")
+        if l_bottom.shape != (m,):
+            raise InputError(f"l_bottom must have shape (M,) = ({m},), got {l_bottom.shape}")
+        verts = [((i + 1, 1), row) for i, row in enumerate(left)]
+        verts += [((1, j + 2), row) for j, row in enumerate(bottom)]
+        for vertex, (a, b, s) in verts:
+            _check_vertex(vertex, a, b, s)
+        for name, arr, where in (("l_left", l_left, "l_ab of panel ({k}, 1)"),
+                                 ("l_bottom", l_bottom, "l_ac of panel (1, {k})")):
+            for k, val in enumerate(arr, start=1):
+                if not np.isfinite(val) or val <= 0:
+                    raise BoundaryDataError(
+                        f"{name}[{k - 1}] = {val!r} ({where.format(k=k)}) must be a finite "
+                        "positive length", vertex=None, value=val)
+        for name, arr in (("left", left), ("bottom", bottom), ("l_left", l_left),
+                          ("l_bottom", l_bottom)):
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    @property
+    def N(self) -> int:
+        """Number of panel rows."""
+        return self.left.shape[0] - 1
+
+    @property
+    def M(self) -> int:
+        """Number of panel columns."""
+        return self.bottom.shape[0]
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Mountain-valley signs of the boundary vertices, left then bottom, (N+1+M,)."""
+        return np.concatenate([self.left[:, 2], self.bottom[:, 2]])
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(alpha, beta) of the boundary vertices, left then bottom, (N+1+M, 2)."""
+        return np.concatenate([self.left[:, :2], self.bottom[:, :2]])
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """Boundary side lengths ell = (l_ab^{11..N1}, l_ac^{11..1M}) of eq:linearP."""
+        return np.concatenate([self.l_left, self.l_bottom])
+
+    def to_vector(self) -> np.ndarray:
+        """Flat design vector: alphas, betas (left then bottom), then lengths (l_left, l_bottom)."""
+        ang = self.angles
+        return np.concatenate([ang[:, 0], ang[:, 1], self.lengths])
+
+    @classmethod
+    def from_vector(cls, x: np.ndarray, sigma: np.ndarray, N: int, M: int) -> "BoundaryData":
+        """Inverse of :meth:`to_vector`, with the boundary signs ``sigma`` (N+1+M,)."""
+        x = np.asarray(x, dtype=float).ravel()
+        nv = N + 1 + M
+        if x.shape != (2 * nv + N + M,):
+            raise InputError(f"design vector must have length {2 * nv + N + M}, got {x.shape}")
+        tri = np.column_stack([x[:nv], x[nv:2 * nv], np.asarray(sigma, dtype=float)])
+        return cls(left=tri[: N + 1], bottom=tri[N + 1:], l_left=x[2 * nv: 2 * nv + N],
+                   l_bottom=x[2 * nv + N:])
+
+    def with_lengths(self, lengths: np.ndarray) -> "BoundaryData":
+        """The same angles with new boundary lengths ell (N+M,)."""
+        lengths = np.asarray(lengths, dtype=float)
+        return BoundaryData(self.left, self.bottom, lengths[: self.N], lengths[self.N:])
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (lists of floats)."""
+        return {k: getattr(self, k).tolist() for k in ("left", "bottom", "l_left", "l_bottom")}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "BoundaryData":
+        """Inverse of :meth:`to_dict`."""
+        try:
+            return cls(**{k: np.asarray(d[k], dtype=float)
+                          for k in ("left", "bottom", "l_left", "l_bottom")})
+        except KeyError as exc:
+            raise InputError(f"boundary data is missing the field {exc.args[0]!r}") from None
+
+
+def _as_float_array(x, name: str) -> np.ndarray:
+    try:
+        arr = np.array(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be an array of numbers: {exc}") from None
+    return arr
+
+
+def _check_vertex(vertex: tuple[int, int], a: float, b: float, s: float) -> None:
+    for name, val in (("alpha", a), ("beta", b)):
+        if not np.isfinite(val) or not 0.0 < val < np.pi:
+            raise BoundaryDataError(
+                f"boundary vertex {vertex}: {name} = {val!r} must lie in (0, pi)",
+                vertex=vertex, value=val)
+    if s not in (1.0, -1.0):
+        raise BoundaryDataError(f"boundary vertex {vertex}: sigma = {s!r} must be +1 or -1",
+                                vertex=vertex, value=s)
+    if abs(a - np.pi / 2) < MV_TOL and abs(b - np.pi / 2) < MV_TOL:
+        raise BoundaryDataError(
+            f"boundary vertex {vertex}: (alpha, beta) = (pi/2, pi/2) admits no rigid folding "
+            "(Theorem 2.1)", vertex=vertex, value=(a, b))
+    if int(s) not in mv_set(a, b):
+        raise BoundaryDataError(
+            f"boundary vertex {vertex}: sigma = {int(s):+d} is not in MV(alpha, beta) = "
+            f"{mv_set(a, b)} for (alpha, beta) = ({a!r}, {b!r}) (eq:foldParams)",
+            vertex=vertex, value=s)
+
+
+def miura_vertex(i: int, j: int, alpha0: float, layout: Layout) -> tuple[float, float, float]:
+    """(alpha, beta, sigma) of vertex (i, j) (1-based) of a Miura-ori (PAPER_NOTES s.6)."""
+    if layout == "zigzag_j":
+        ang = alpha0 if j % 2 == 1 else np.pi - alpha0
+        return ang, ang, -1.0
+    if layout == "zigzag_i":
+        ang = alpha0 if i % 2 == 1 else np.pi - alpha0
+        return ang, np.pi - ang, 1.0
+    raise InputError(f"layout must be one of {LAYOUTS}, got {layout!r}")
+
+
+def miura_boundary(N: int, M: int, a: float = 1.0, b: float = 1.0, alpha0: float = 1.2,
+                   layout: Layout = "zigzag_j") -> BoundaryData:
+    """Boundary data of an N x M Miura-ori with sides a (straight) and b (zig-zag).
+
+    ``layout="zigzag_j"``: the zig-zag runs along j (alpha = beta, sigma = -1, l_ab = a,
+    l_ac = b); ``"zigzag_i"``: along i (beta = pi - alpha, sigma = +1, l_ab = b, l_ac = a).
+    """
+    N, M = _check_size(N, M)
+    if not (np.isfinite(alpha0) and 0 < alpha0 < np.pi / 2):
+        raise InputError(f"alpha0 must be an acute angle in (0, pi/2), got {alpha0!r}")
+    for name, val in (("a", a), ("b", b)):
+        if not (np.isfinite(val) and val > 0):
+            raise InputError(f"side {name} must be a finite positive length, got {val!r}")
+    left = np.array([miura_vertex(i, 1, alpha0, layout) for i in range(1, N + 2)])
+    bottom = np.array([miura_vertex(1, j, alpha0, layout) for j in range(2, M + 2)])
+    l_ab, l_ac = (a, b) if layout == "zigzag_j" else (b, a)
+    return BoundaryData(left, bottom, np.full(N, float(l_ab)), np.full(M, float(l_ac)))
+
+
+def perturb_angles(bd: BoundaryData, amplitude: float = 0.05 * np.pi,
+                   seed: int | np.random.Generator | None = None) -> BoundaryData:
+    """Boundary angles perturbed by U(-amplitude, amplitude), signs and lengths kept.
+
+    This is the paper's Fig. Random input (amplitude 0.05 pi around a Miura-ori). Raises
+    :class:`BoundaryDataError` if a perturbed vertex leaves the admissible set.
+    """
+    rng = np.random.default_rng(seed)
+    if not (np.isfinite(amplitude) and amplitude >= 0):
+        raise InputError(f"amplitude must be a finite non-negative angle, got {amplitude!r}")
+    left = bd.left.copy()
+    bottom = bd.bottom.copy()
+    left[:, :2] += rng.uniform(-amplitude, amplitude, size=left[:, :2].shape)
+    bottom[:, :2] += rng.uniform(-amplitude, amplitude, size=bottom[:, :2].shape)
+    return BoundaryData(left, bottom, bd.l_left, bd.l_bottom)
+
+
+def _check_size(N, M) -> tuple[int, int]:
+    for name, val in (("N", N), ("M", M)):
+        if int(val) != val or val < 1:
+            raise InputError(f"{name} must be a positive integer number of panels, got {val!r}")
+    return int(N), int(M)

@@ -1,0 +1,339 @@
+"""The marching algorithm as CasADi graphs: crease pattern and folded states.
+
+One panel cell (eq:marchingSector .. eq:getSides) is a small SX ``casadi.Function``; a row of
+panels is its ``mapaccum`` along j, the pattern is the ``mapaccum`` of rows along i, so the
+graph size does not grow with the pattern. The kinematics (eq:foldInitial .. eq:finalCalc)
+is written with whole-matrix MX operations: every fold angle obeys
+tan(gamma/2) = k tan(omega/2) with a pattern constant k, panel rotations are cumulative
+quaternion products (a ``mapaccum`` over rows) and positions are cumulative sums of rotated
+flat edge vectors. Vertex arrays are (N+1, M+1) matrices, vertex (i, j) at [i-1, j-1].
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from . import vertex as vx
+from .boundary import BoundaryData
+from .errors import InputError, MarchingError
+from .pattern import Pattern
+
+PI = np.pi
+#: The second check fails when | |mu_abc| - 1 | is at most this.
+MU_TOL = 1e-12
+
+
+# --------------------------------------------------------------------------- pattern
+@lru_cache(maxsize=None)
+def panel_cell() -> ca.Function:
+    """One panel (i, j): vertex triples of b, a, c and sides l_ab, l_ac -> vertex d, sides.
+
+    Inputs ``x = (alpha, beta, sigma) of b, l_ab`` (the accumulator along a row) and
+    ``u = (alpha, beta, sigma) of a, (alpha, beta, sigma) of c, l_ac``; outputs
+    ``x_next = (alpha, beta, sigma) of d, l_cd`` and ``y = (l_bd, mu_abc, alpha_d)``.
+    Roles follow PAPER_NOTES s.1 (eq:marchingSector, eq:marchingMV, eq:marchingSides).
+    """
+    x = ca.SX.sym("x", 4)
+    u = ca.SX.sym("u", 7)
+    alpha_a, beta_a, sigma_a = u[0], u[1], u[2]
+    alpha_b, beta_b, sigma_b = PI - x[1], PI - x[0], x[2]
+    alpha_c, beta_c, sigma_c = u[4], u[3], u[5]
+    total = alpha_a + alpha_b + alpha_c
+    alpha_d = 2 * PI - total
+    mu = (vx.mu1(alpha_a, beta_a, sigma_a) * vx.mu2(alpha_b, beta_b, sigma_b)
+          * vx.mu2(alpha_c, beta_c, sigma_c))
+    beta_d, sigma_d = vx.design_d(alpha_d, mu)
+    l_cd, l_bd = vx.panel_sides(alpha_a, alpha_b, alpha_c, x[3], u[6])
+    x_next = ca.vertcat(PI - alpha_d, PI - beta_d, sigma_d, l_cd)
+    return ca.Function("panel", [x, u], [x_next, ca.vertcat(l_bd, mu, alpha_d)],
+                       ["x", "u"], ["x_next", "y"])
+
+
+@lru_cache(maxsize=None)
+def _row_step(M: int) -> ca.Function:
+    """Row i of vertices (3 x M+1), its lengths lh (1 x M) and the left data -> row i+1."""
+    along_row = panel_cell().mapaccum("row", M)
+    V = ca.MX.sym("V", 3, M + 1)
+    Lh = ca.MX.sym("Lh", 1, M)
+    left = ca.MX.sym("left", 4)
+    xs, ys = along_row(left, ca.vertcat(V[:, :M], V[:, 1:], Lh))
+    return ca.Function("row_step", [V, Lh, left],
+                       [ca.horzcat(left[:3], xs[:3, :]), ys[0, :], ca.horzcat(left[3], xs[3, :]),
+                        ys[1, :], ys[2, :]])
+
+
+@lru_cache(maxsize=None)
+def pattern_function(N: int, M: int) -> ca.Function:
+    """Boundary data -> crease pattern, as one CasADi Function.
+
+    Inputs: ``left`` (3 x N+1), ``bottom`` (3 x M) (rows alpha, beta, sigma), ``l_left``
+    (1 x N), ``l_bottom`` (1 x M). Outputs: ``alpha, beta, sigma`` (N+1 x M+1), ``lh``
+    (N+1 x M), ``lv`` (N x M+1), ``mu`` and ``alpha_d`` (N x M), flat positions ``Xx, Xy``
+    (N+1 x M+1).
+    """
+    left = ca.MX.sym("left", 3, N + 1)
+    bottom = ca.MX.sym("bottom", 3, M)
+    l_left = ca.MX.sym("l_left", 1, N)
+    l_bottom = ca.MX.sym("l_bottom", 1, M)
+    rows = _row_step(M).mapaccum("rows", N, 2)
+    row1 = ca.horzcat(left[:, 0], bottom)
+    V, Lh, Lv, mu, alpha_d = rows(row1, l_bottom, ca.vertcat(left[:, 1:], l_left))
+
+    def stack(first, blocks, width):
+        body = ca.reshape(blocks, width, N).T
+        return body if first is None else ca.vertcat(first, body)
+
+    alpha, beta, sigma = (stack(row1[k, :], V[k, :], M + 1) for k in range(3))
+    lh = stack(l_bottom, Lh, M)
+    lv = stack(None, Lv, M + 1)
+    Xx, Xy = _flat_positions(alpha, beta, lh, lv)
+    return ca.Function(
+        "pattern", [left, bottom, l_left, l_bottom],
+        [alpha, beta, sigma, lh, lv, stack(None, mu, M), stack(None, alpha_d, M), Xx, Xy],
+        ["left", "bottom", "l_left", "l_bottom"],
+        ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "Xx", "Xy"])
+
+
+def _directions(alpha, beta):
+    """Directions of the horizontal edges (N+1 x M+1; the last column is auxiliary).
+
+    Accumulated sector angles (PAPER_NOTES s.4): along the left column the direction turns by
+    alpha(i, 1) - beta(i+1, 1), along a row by pi - alpha - beta of each vertex.
+    """
+    first_col = ca.vertcat(0, ca.cumsum(alpha[:-1, 0] - beta[1:, 0], 0))
+    turn = PI - alpha[:, 1:] - beta[:, 1:]
+    return ca.repmat(first_col, 1, alpha.shape[1]) + ca.horzcat(
+        ca.MX.zeros(alpha.shape[0], 1), ca.cumsum(turn, 1))
+
+
+def _flat_positions(alpha, beta, lh, lv):
+    """Flat vertex positions as cumulative sums of edge vectors (stable, PAPER_NOTES s.4)."""
+    theta_h = _directions(alpha, beta)
+    theta_v = theta_h[:-1, :] + alpha[:-1, :]
+    bottom_x = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.cos(theta_h[0, :-1]), 1))
+    bottom_y = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.sin(theta_h[0, :-1]), 1))
+    Xx = ca.vertcat(bottom_x, ca.repmat(bottom_x, lv.shape[0], 1)
+                    + ca.cumsum(lv * ca.cos(theta_v), 0))
+    Xy = ca.vertcat(bottom_y, ca.repmat(bottom_y, lv.shape[0], 1)
+                    + ca.cumsum(lv * ca.sin(theta_v), 0))
+    return Xx, Xy
+
+
+# --------------------------------------------------------------------------- kinematics
+def _sign_products(signs, axis: int):
+    """Cumulative products of +-1 entries along ``axis`` (exact: parity of a count)."""
+    count = ca.cumsum((1 - signs) / 2, axis)
+    return 1 - 2 * ca.fmod(count, 2)
+
+
+def fold_multipliers(alpha, beta, sigma):
+    """Factors kh (N+1 x M+1), kv (N+1 x M+1) with tan(gamma/2) = k tan(omega/2).
+
+    kh[i, j] belongs to gamma1 of vertex (i+1, j+1) (the horizontal edge to its right),
+    kv[i, j] to gamma2 (the vertical edge above it): eq:foldInitial, eq:foldMiddle and
+    eq:foldFinal with the half-angle forms of gamma2_bar and gamma1_bar.
+    """
+    m2 = vx.mu2(alpha, beta, sigma)
+    kh0 = ca.horzcat(1, _sign_products(-sigma[0, 1:], 1))
+    kv0 = -kh0 / m2[0, :]
+    kv = ca.repmat(kv0, alpha.shape[0], 1) * ca.vertcat(
+        ca.MX.ones(1, alpha.shape[1]), _sign_products(sigma[1:, :], 0))
+    kh = ca.vertcat(kh0, -kv[1:, :] * m2[1:, :])
+    return kh, kv
+
+
+def _crease_quaternion(theta, k, c, s, sign=1.0):
+    """Unit quaternion of R_t(sign * gamma), t = (cos theta, sin theta, 0), tan(gamma/2) = k s/c."""
+    r = ca.sqrt(c * c + k * k * s * s)
+    w, sh = c / r, sign * k * s / r
+    return w, sh * ca.cos(theta), sh * ca.sin(theta), 0 * w
+
+
+def _qmul(p, q):
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
+@lru_cache(maxsize=None)
+def _qmul_step(width: int) -> ca.Function:
+    P = ca.MX.sym("P", 4, width)
+    Q = ca.MX.sym("Q", 4, width)
+    prod = _qmul([P[k, :] for k in range(4)], [Q[k, :] for k in range(4)])
+    return ca.Function("qmul", [P, Q], [ca.vertcat(*prod)])
+
+
+def _cumulative_qprod(first, steps, count: int, width: int):
+    """Q_0 = first, Q_k = Q_{k-1} * steps_k: quaternion rows (4 x width) over ``count`` steps."""
+    if count == 0:
+        return first
+    acc = _qmul_step(width).mapaccum("qprod", count)
+    return ca.horzcat(first, acc(first, steps))
+
+
+def _rotate_planar(q, vx_, vy_):
+    """Rotate in-plane vectors (vx, vy, 0) by unit quaternions q = (w, x, y, z), elementwise."""
+    w, x, y, z = q
+    return ((1 - 2 * (y * y + z * z)) * vx_ + 2 * (x * y - w * z) * vy_,
+            2 * (x * y + w * z) * vx_ + (1 - 2 * (x * x + z * z)) * vy_,
+            2 * (x * z - w * y) * vx_ + 2 * (y * z + w * x) * vy_)
+
+
+@lru_cache(maxsize=None)
+def fold_function(N: int, M: int) -> ca.Function:
+    """Pattern and omega -> folded vertices, as one CasADi Function.
+
+    Inputs: ``alpha, beta, sigma`` (N+1 x M+1), ``lh`` (N+1 x M), ``lv`` (N x M+1),
+    ``omega``. Outputs: ``Yx, Yy, Yz`` (N+1 x M+1) with R^{11} = I, y^{11} = x^{11} = 0.
+    """
+    alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
+    lh = ca.MX.sym("lh", N + 1, M)
+    lv = ca.MX.sym("lv", N, M + 1)
+    omega = ca.MX.sym("omega")
+    Yx, Yy, Yz = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    return ca.Function("fold", [alpha, beta, sigma, lh, lv, omega], [Yx, Yy, Yz],
+                       ["alpha", "beta", "sigma", "lh", "lv", "omega"], ["Yx", "Yy", "Yz"])
+
+
+@lru_cache(maxsize=None)
+def folded_function(N: int, M: int) -> ca.Function:
+    """Boundary data and omega -> folded vertices: :func:`pattern_function` then
+    :func:`fold_function`, the differentiable map the inverse design optimises through.
+
+    Inputs: ``left, bottom, l_left, l_bottom`` as in :func:`pattern_function`, ``omega``.
+    Outputs: ``Yx, Yy, Yz`` (N+1 x M+1).
+    """
+    pattern = pattern_function(N, M)
+    inputs = pattern.mx_in()
+    alpha, beta, sigma, lh, lv, *_ = pattern.call(inputs)
+    omega = ca.MX.sym("omega")
+    Y = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    return ca.Function("folded", [*inputs, omega], list(Y),
+                       [*pattern.name_in(), "omega"], ["Yx", "Yy", "Yz"])
+
+
+def _fold_expr(alpha, beta, sigma, lh, lv, omega):
+    N, M = lv.shape[0], lh.shape[1]
+    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
+    kh, kv = fold_multipliers(alpha, beta, sigma)
+    theta_h = _directions(alpha, beta)
+    theta_v = theta_h[:-1, :] + alpha[:-1, :]
+    # Bottom row: R^{1j} = R^{1(j-1)} R_{t2}(-gamma2^{1j}) (eq:defGrads).
+    qv = _crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
+    q_row1 = _cumulative_qprod(ca.DM([1, 0, 0, 0]), ca.vertcat(*qv), M - 1, 1)
+    # Later rows: R^{ij} = R^{(i-1)j} R_{t1}(gamma1^{ij}).
+    qh = _crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
+    steps = ca.vertcat(*(ca.reshape(comp.T, 1, M * (N - 1)) for comp in qh))
+    Q = _cumulative_qprod(q_row1, steps, N - 1, M)
+    quat = [ca.reshape(Q[k, :], M, N).T for k in range(4)]  # (N x M) per component
+    # Deformed edges: bottom edges of row 1 by R^{1j}, vertical edges by the panel on their
+    # right (the last column by the panel on its left); positions are cumulative sums.
+    bottom = _rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
+                            lh[0, :] * ca.sin(theta_h[0, :M]))
+    quat_v = [ca.horzcat(comp, comp[:, M - 1]) for comp in quat]
+    vert = _rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
+    out = []
+    for b, v in zip(bottom, vert):
+        row1 = ca.horzcat(0, ca.cumsum(b, 1))
+        out.append(ca.vertcat(row1, ca.repmat(row1, N, 1) + ca.cumsum(v, 0)))
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------- evaluation
+def boundary_inputs(bd: BoundaryData) -> list[np.ndarray]:
+    """The inputs of :func:`pattern_function` for boundary data ``bd``."""
+    return [bd.left.T, bd.bottom.T, bd.l_left[None, :], bd.l_bottom[None, :]]
+
+
+def locate_failure(alpha_d: np.ndarray, mu: np.ndarray, lh: np.ndarray,
+                   lv: np.ndarray) -> tuple[str, tuple[int, int]] | None:
+    """The first failing check in marching order, or None when the pattern is valid.
+
+    Panels are visited row-major; a panel's inputs all come from earlier panels, so the
+    first flagged panel is a genuine failure. NaN counts as a failure.
+    """
+    first = ~((alpha_d > 0) & (alpha_d < PI))
+    second = ~(np.abs(np.abs(mu) - 1) > MU_TOL)
+    final = ~((lv[:, 1:] > 0) & (lh[1:, :] > 0))
+    bad = first | second | final
+    if not bad.any():
+        return None
+    i, j = np.unravel_index(np.argmax(bad.ravel()), bad.shape)
+    check = "first" if first[i, j] else "second" if second[i, j] else "final"
+    return check, (int(i) + 1, int(j) + 1)
+
+
+def march(bd: BoundaryData) -> Pattern:
+    """March the crease pattern of ``bd`` with the CasADi graph.
+
+    Raises :class:`MarchingError` naming the check and the first failing panel.
+    """
+    if not isinstance(bd, BoundaryData):
+        raise InputError(f"march expects BoundaryData, got {type(bd).__name__}")
+    out = pattern_function(bd.N, bd.M).call(boundary_inputs(bd))
+    alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = (np.array(o.full()) for o in out)
+    failure = locate_failure(alpha_d, mu, lh, lv)
+    if failure is not None:
+        check, (i, j) = failure
+        detail = (f"alpha_d = {alpha_d[i - 1, j - 1]:.6g}, mu_abc = {mu[i - 1, j - 1]:.6g}, "
+                  f"l_cd = {lv[i - 1, j]:.6g}, l_bd = {lh[i, j - 1]:.6g}")
+        raise MarchingError(check, (i, j), detail)
+    X = np.stack([Xx, Xy, np.zeros_like(Xx)], axis=-1)
+    return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
+
+
+def check_omega(omega) -> np.ndarray:
+    """Validated fold parameter(s) as a float array; |omega| <= pi, finite."""
+    arr = np.asarray(omega, dtype=float)
+    if arr.ndim > 1:
+        raise InputError(f"omega must be a scalar or a 1-D array, got shape {arr.shape}")
+    bad = ~np.isfinite(arr) | (np.abs(arr) > PI)
+    if bad.any():
+        raise InputError(f"omega must lie in [-pi, pi], got {arr[bad].ravel()[0]!r}")
+    return arr
+
+
+def fold(pat: Pattern, omega) -> np.ndarray:
+    """Folded vertex positions: (N+1, M+1, 3) for scalar omega, (K, N+1, M+1, 3) for K values."""
+    if not isinstance(pat, Pattern):
+        raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")
+    om = check_omega(omega)
+    f = fold_function(pat.N, pat.M)
+    args = [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv]
+    if om.ndim == 0:
+        return np.stack([o.full() for o in f.call([*args, float(om)])], axis=-1)
+    K = om.size
+    fk = f.map(K)
+    outs = fk.call([*args, om[None, :]])
+    n1 = pat.N + 1
+    return np.stack([o.full().reshape(n1, K, pat.M + 1).transpose(1, 0, 2) for o in outs],
+                    axis=-1)
+
+
+def fold_angles(pat: Pattern, omega: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fold angle of every edge at ``omega``: gamma_h (N+1, M), gamma_v (N, M+1).
+
+    Boundary edges (bottom and top rows of gamma_h, first and last columns of gamma_v) are
+    not creases and get 0. gamma > 0 is a valley (eq:MVAngles).
+    """
+    om = float(check_omega(omega))
+    kh, kv = (k.full() for k in _multiplier_function(pat.N, pat.M)(pat.alpha, pat.beta,
+                                                                   pat.sigma))
+    half = om / 2
+    gh = 2 * np.arctan2(kh[:, :-1] * np.sin(half), np.cos(half))
+    gv = 2 * np.arctan2(kv[:-1, :] * np.sin(half), np.cos(half))
+    gh[[0, -1], :] = 0.0
+    gv[:, [0, -1]] = 0.0
+    return gh, gv
+
+
+@lru_cache(maxsize=None)
+def _multiplier_function(N: int, M: int) -> ca.Function:
+    sym = [ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma")]
+    return ca.Function("multipliers", sym, list(fold_multipliers(*sym)))

@@ -1,0 +1,83 @@
+"""The crease pattern produced by marching: one container shared by both forward models."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .boundary import BoundaryData
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """A marched RFFQM crease pattern of N x M panels.
+
+    Vertex (i, j) (1-based) is stored at ``[i-1, j-1]``.
+
+    * ``alpha, beta, sigma`` (N+1, M+1): a-role triple of every vertex (PAPER_NOTES s.1);
+    * ``lh`` (N+1, M): length of the horizontal edge (i, j) -> (i, j+1), i.e. l_ac of panel
+      (i, j) and l_bd of panel (i-1, j);
+    * ``lv`` (N, M+1): length of the vertical edge (i, j) -> (i+1, j), i.e. l_ab of panel
+      (i, j) and l_cd of panel (i, j-1);
+    * ``mu`` (N, M): the multiplier mu_abc of every panel (eq:muABC);
+    * ``X`` (N+1, M+1, 3): flat vertex positions, x_a^{11} = 0, x_c^{11} on +e1, z = 0.
+    """
+
+    alpha: np.ndarray
+    beta: np.ndarray
+    sigma: np.ndarray
+    lh: np.ndarray
+    lv: np.ndarray
+    mu: np.ndarray
+    X: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X"):
+            arr = np.array(getattr(self, name), dtype=float)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    @property
+    def N(self) -> int:
+        """Number of panel rows."""
+        return self.alpha.shape[0] - 1
+
+    @property
+    def M(self) -> int:
+        """Number of panel columns."""
+        return self.alpha.shape[1] - 1
+
+    @property
+    def panel_angles(self) -> np.ndarray:
+        """Interior angles (alpha_a, alpha_b, alpha_c, alpha_d) of every panel, (N, M, 4)."""
+        a, b = self.alpha, self.beta
+        return np.stack([a[:-1, :-1], np.pi - b[1:, :-1], b[:-1, 1:], np.pi - a[1:, 1:]],
+                        axis=-1)
+
+    @property
+    def boundary(self) -> BoundaryData:
+        """The boundary data this pattern was marched from."""
+        tri = np.stack([self.alpha, self.beta, self.sigma], axis=-1)
+        return BoundaryData(tri[:, 0], tri[0, 1:], self.lv[:, 0], self.lh[0, :])
+
+    @property
+    def sector_angles(self) -> np.ndarray:
+        """All sector angles of the pattern: every panel's four interior angles, flattened."""
+        return self.panel_angles.ravel()
+
+    @property
+    def side_lengths(self) -> np.ndarray:
+        """All edge lengths of the pattern, horizontal then vertical, flattened."""
+        return np.concatenate([self.lh.ravel(), self.lv.ravel()])
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary."""
+        return {k: getattr(self, k).tolist()
+                for k in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Pattern":
+        """Inverse of :meth:`to_dict`."""
+        return cls(**{k: np.asarray(d[k], dtype=float)
+                      for k in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")})

@@ -1,0 +1,115 @@
+"""One degree-4 vertex: fold-angle multipliers, fold-angle functions and the design formula.
+
+Every function is written once over array-like math and serves NumPy arrays and CasADi
+symbols alike. All forms are the smooth half-angle ones (PAPER_NOTES s.2): for the a-role
+sector angles (alpha, beta) and sign sigma,
+
+    mu2^{-1}(alpha, beta) = cos((alpha - beta)/2) / cos((alpha + beta)/2),
+    mu2^{+1}(alpha, beta) = -sin((alpha - beta)/2) / sin((alpha + beta)/2),
+
+which equal eq:foldAngMult, and mu1^{-sigma} = 1 / mu2^{sigma}. The fold-angle functions are
+tan(gamma2_bar/2) = -tan(omega/2)/mu2 and tan(gamma1_bar/2) = -tan(omega/2)/mu1.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
+
+
+class _NumPyOps:
+    cos, sin, tan, atan, atan2, sqrt, fabs = (np.cos, np.sin, np.tan, np.arctan, np.arctan2,
+                                              np.sqrt, np.abs)
+
+    @staticmethod
+    def where(cond, a, b):
+        return np.where(cond, a, b)
+
+
+class _CasADiOps:
+    cos, sin, tan, atan, atan2, sqrt, fabs = (ca.cos, ca.sin, ca.tan, ca.atan, ca.atan2,
+                                              ca.sqrt, ca.fabs)
+
+    @staticmethod
+    def where(cond, a, b):
+        return ca.if_else(cond, a, b)
+
+
+def ops(*args):
+    """The math namespace for the arguments: CasADi if any of them is a CasADi object."""
+    return _CasADiOps if any(isinstance(a, _CASADI_TYPES) for a in args) else _NumPyOps
+
+
+def mu2(alpha, beta, sigma):
+    """Fold-angle multiplier mu2^sigma(alpha, beta) (eq:foldAngMult), half-angle form."""
+    op = ops(alpha, beta, sigma)
+    h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):  # the unused branch may divide by 0
+        return op.where(sigma < 0, op.cos(h_minus) / op.cos(h_plus),
+                        -op.sin(h_minus) / op.sin(h_plus))
+
+
+def mu1(alpha, beta, sigma):
+    """Fold-angle multiplier mu1^{-sigma}(alpha, beta) = 1 / mu2^sigma(alpha, beta)."""
+    op = ops(alpha, beta, sigma)
+    h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return op.where(sigma < 0, op.cos(h_plus) / op.cos(h_minus),
+                        -op.sin(h_plus) / op.sin(h_minus))
+
+
+def fold_by_multiplier(omega, mu):
+    """The group element g with tan(g/2) = -tan(omega/2)/mu, on omega in [-pi, pi].
+
+    Written with atan2 so omega = +-pi (folded flat) is exact: g = -sign(mu) omega there.
+    """
+    op = ops(omega, mu)
+    half = omega / 2
+    return 2 * op.atan2(-op.sin(half) * _sign(mu, op), op.fabs(mu) * op.cos(half))
+
+
+def gamma2_bar(omega, alpha, beta, sigma):
+    """gamma2 as a function of gamma1 = omega at a vertex (Theorem 2.1)."""
+    return fold_by_multiplier(omega, mu2(alpha, beta, sigma))
+
+
+def gamma1_bar(omega, alpha, beta, sigma):
+    """Inverse of :func:`gamma2_bar` (eq:inverse): gamma1 as a function of gamma2 = omega."""
+    return fold_by_multiplier(omega, mu1(alpha, beta, sigma))
+
+
+def fold_angles(omega, alpha, beta, sigma):
+    """(gamma1, gamma2, gamma3, gamma4) at a vertex (eq:foldParams)."""
+    g2 = gamma2_bar(omega, alpha, beta, sigma)
+    return omega, g2, -sigma * omega, sigma * g2
+
+
+def design_d(alpha_d, mu_abc):
+    """The design formula (eq:SuperParam) in half-angle form: (beta_d, sigma_d).
+
+    sigma_d = -sign(mu^2 - 1). Solving mu2^{sigma_d}(alpha_d, beta_d) = mu with
+    u = tan(alpha_d/2), v = tan(beta_d/2) and k = (mu - 1)/(mu + 1) gives v = k/u for
+    sigma_d = -1 and v = -u/k for sigma_d = +1; v > 0 whenever |mu| != 1.
+    """
+    op = ops(alpha_d, mu_abc)
+    outside = mu_abc * mu_abc > 1
+    sigma_d = op.where(outside, -1.0, 1.0)
+    u = op.tan(alpha_d / 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = op.where(outside, (mu_abc - 1) / ((mu_abc + 1) * u), u * (1 + mu_abc) / (1 - mu_abc))
+    return 2 * op.atan(v), sigma_d
+
+
+def panel_sides(alpha_a, alpha_b, alpha_c, l_ab, l_ac):
+    """(l_cd, l_bd) from the panel's angles and its left and bottom sides (eq:getSides)."""
+    op = ops(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
+    s = op.sin(alpha_a + alpha_b + alpha_c)
+    l_cd = (-op.sin(alpha_b) * l_ab + op.sin(alpha_a + alpha_b) * l_ac) / s
+    l_bd = (op.sin(alpha_a + alpha_c) * l_ab - op.sin(alpha_c) * l_ac) / s
+    return l_cd, l_bd
+
+
+def _sign(x, op):
+    return op.where(x < 0, -1.0, 1.0)

@@ -1,0 +1,315 @@
+"""The CasADi marching graph: invariants of PAPER_NOTES s.7, closed forms, errors, gradients."""
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+import rffqm_nlp as rq
+from rffqm_nlp import marching as mg
+from rffqm_nlp import vertex as vx
+from rffqm_nlp.lengths import side_length_lp
+
+from helpers import admissible_vertex, panel_distances, panel_rotations, rot_about, unit
+
+OMEGAS = [0.0, 1e-9, 0.3, -1.1, 2.5, np.pi - 1e-9, np.pi, -np.pi]
+
+
+def small_perturbed(N, M, seed, amplitude=0.01 * np.pi, layout="zigzag_j"):
+    bd = rq.perturb_angles(rq.miura_boundary(N, M, a=1.0, b=1.3, alpha0=1.1, layout=layout),
+                           amplitude, seed)
+    return side_length_lp(bd)
+
+
+# --------------------------------------------------------------- one vertex (s.7 items 1, 2)
+@given(admissible_vertex(), st.floats(-np.pi, np.pi))
+def test_vertex_loop_closes(v, omega):
+    a, b, s = v
+    t1 = unit(0.0)
+    t2 = unit(a)
+    t3 = unit(a + b)
+    t4 = unit(a + b + np.pi - a)
+    g1, g2, g3, g4 = vx.fold_angles(omega, a, b, s)
+    loop = rot_about(t1, g1) @ rot_about(t2, g2) @ rot_about(t3, g3) @ rot_about(t4, g4)
+    np.testing.assert_allclose(loop, np.eye(3), atol=1e-12)
+
+
+@given(admissible_vertex(), st.floats(-np.pi, np.pi))
+def test_gamma_bar_inverse_and_maekawa(v, omega):
+    a, b, s = v
+    g1, g2, g3, g4 = vx.fold_angles(omega, a, b, s)
+    assert vx.gamma1_bar(g2, a, b, s) == pytest.approx(omega, abs=1e-12)
+    if 1e-6 < abs(omega) < np.pi - 1e-6:
+        assert np.sin(g1) * np.sin(g2) * np.sin(g3) * np.sin(g4) < 0
+
+
+@given(admissible_vertex(), st.floats(0.05, np.pi - 0.05))
+def test_gamma2_bar_matches_paper_arccos_form(v, omega):
+    a, b, s = v
+    arg = (((-s + np.cos(a) * np.cos(b)) * np.cos(omega) + np.sin(a) * np.sin(b))
+           / (-s + np.cos(a) * np.cos(b) + np.sin(a) * np.sin(b) * np.cos(omega)))
+    paper = np.sign((s * np.cos(b) - np.cos(a)) * omega) * np.arccos(np.clip(arg, -1, 1))
+    assert vx.gamma2_bar(omega, a, b, s) == pytest.approx(paper, abs=1e-7)
+
+
+@given(st.floats(np.pi + 0.05, 2 * np.pi - 0.05), st.floats(-5, 5))
+def test_design_formula_matches_paper(total, mu):
+    if abs(abs(mu) - 1) < 1e-3 or abs(mu) < 1e-3:
+        return
+    sigma_d = -np.sign(mu ** 2 - 1)
+    paper = np.arccos(sigma_d * (2 * mu - (mu ** 2 + 1) * np.cos(total))
+                      / (2 * mu * np.cos(total) - (mu ** 2 + 1)))
+    beta_d, s_d = vx.design_d(2 * np.pi - total, mu)
+    assert s_d == sigma_d
+    assert beta_d == pytest.approx(paper, abs=1e-9)
+    assert vx.mu2(2 * np.pi - total, beta_d, s_d) == pytest.approx(mu, rel=1e-9)
+
+
+# --------------------------------------------------------------- the pattern
+@pytest.mark.parametrize("layout", ["zigzag_j", "zigzag_i"])
+def test_miura_pattern_is_parallelograms(layout):
+    pat = mg.march(rq.miura_boundary(4, 6, a=1.0, b=1.5, alpha0=1.0, layout=layout))
+    ang = pat.panel_angles
+    np.testing.assert_allclose(ang[..., 0], ang[..., 3], atol=1e-13)
+    np.testing.assert_allclose(ang[..., 1], ang[..., 2], atol=1e-13)
+    np.testing.assert_allclose(ang.sum(-1), 2 * np.pi, atol=1e-13)
+    assert set(np.unique(pat.sigma)) == {-1.0 if layout == "zigzag_j" else 1.0}
+
+
+def test_pattern_panel_angles_and_flat_geometry_agree():
+    pat = mg.march(small_perturbed(6, 7, seed=3))
+    X = pat.X
+    a, b, c, d = X[:-1, :-1], X[1:, :-1], X[:-1, 1:], X[1:, 1:]
+
+    def angle(p, q, r):
+        u, v = q - p, r - p
+        return np.arccos(np.sum(u * v, -1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1))
+
+    measured = np.stack([angle(a, c, b), angle(b, a, d), angle(c, d, a), angle(d, b, c)], -1)
+    np.testing.assert_allclose(measured, pat.panel_angles, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(c - a, axis=-1), pat.lh[:-1], rtol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(d - b, axis=-1), pat.lh[1:], rtol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(b - a, axis=-1), pat.lv[:, :-1], rtol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(d - c, axis=-1), pat.lv[:, 1:], rtol=1e-13)
+    assert np.all(X[..., 2] == 0) and np.all(X[0, 0] == 0) and X[0, 1, 1] == 0 < X[0, 1, 0]
+
+
+# --------------------------------------------------------------- kinematics (s.7 items 3-5)
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_every_vertex_satisfies_theorem_2_1(seed):
+    pat = mg.march(small_perturbed(5, 6, seed))
+    omega = 1.3
+    gh, gv = mg.fold_angles(pat, omega)
+    X = pat.X
+    for i in range(1, pat.N):
+        for j in range(1, pat.M):
+            a, b, s = pat.alpha[i, j], pat.beta[i, j], pat.sigma[i, j]
+            g1, g2, g3, g4 = gh[i, j], gv[i, j], gh[i, j - 1], gv[i - 1, j]
+            assert g3 == pytest.approx(-s * g1, abs=1e-12)
+            assert g4 == pytest.approx(s * g2, abs=1e-12)
+            assert vx.gamma2_bar(g1, a, b, s) == pytest.approx(g2, abs=1e-12)
+            tang = [X[i, j + 1] - X[i, j], X[i + 1, j] - X[i, j], X[i, j - 1] - X[i, j],
+                    X[i - 1, j] - X[i, j]]
+            tang = [t / np.linalg.norm(t) for t in tang]
+            loop = (rot_about(tang[0], g1) @ rot_about(tang[1], g2) @ rot_about(tang[2], g3)
+                    @ rot_about(tang[3], g4))
+            np.testing.assert_allclose(loop, np.eye(3), atol=1e-12)
+
+
+@pytest.mark.parametrize("omega", [0.4, -2.0, 3.0])
+def test_panel_compatibility_both_deformation_gradients_agree(omega):
+    pat = mg.march(small_perturbed(5, 5, seed=7))
+    R = panel_rotations(pat.X, mg.fold(pat, omega))
+    gh, gv = mg.fold_angles(pat, omega)
+    X = pat.X
+    np.testing.assert_allclose(R[0, 0], np.eye(3), atol=1e-13)
+    for i in range(pat.N):
+        for j in range(pat.M):
+            if j > 0:
+                t2 = X[i + 1, j] - X[i, j]
+                left = R[i, j - 1] @ rot_about(t2 / np.linalg.norm(t2), -gv[i, j])
+                np.testing.assert_allclose(R[i, j], left, atol=1e-12)
+            if i > 0:
+                t1 = X[i, j + 1] - X[i, j]
+                below = R[i - 1, j] @ rot_about(t1 / np.linalg.norm(t1), gh[i, j])
+                np.testing.assert_allclose(R[i, j], below, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_isometry_flat_and_folded_flat(seed):
+    pat = mg.march(small_perturbed(8, 9, seed))
+    d0 = panel_distances(pat.X)
+    Y = mg.fold(pat, np.array(OMEGAS))
+    for k, omega in enumerate(OMEGAS):
+        np.testing.assert_allclose(panel_distances(Y[k]), d0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Y[0], pat.X, atol=1e-14)
+    for k in (6, 7):
+        pts = Y[k].reshape(-1, 3) - Y[k].reshape(-1, 3).mean(0)
+        sv = np.linalg.svd(pts, compute_uv=False)
+        assert sv[-1] < 1e-10 * sv[0]
+
+
+def test_large_pattern_isometry():
+    bd = rq.perturb_angles(rq.miura_boundary(120, 120, alpha0=1.1), 0.001 * np.pi, seed=1)
+    pat = mg.march(bd)
+    scale = np.abs(pat.X).max()
+    Y = mg.fold(pat, 2.0)
+    err = np.abs(panel_distances(Y) - panel_distances(pat.X)).max()
+    assert err < 1e-10 * scale
+
+
+@pytest.mark.parametrize("layout", ["zigzag_j", "zigzag_i"])
+@pytest.mark.parametrize("omega", [0.2, 1.0, -2.2, 3.0, np.pi])
+def test_miura_matches_schenk_guest(layout, omega):
+    a, b, alpha0 = 1.0, 1.4, 1.05
+    pat = mg.march(rq.miura_boundary(4, 4, a=a, b=b, alpha0=alpha0, layout=layout))
+    Y = mg.fold(pat, omega)
+    if layout == "zigzag_j":
+        theta = abs(omega) / 2
+        straight, zigzag = Y[2, 1] - Y[0, 1], Y[1, 2] - Y[1, 0]
+        e_a, e_b = Y[1, 1] - Y[0, 1], Y[1, 1] - Y[1, 0]
+    else:
+        theta = np.arctan(np.tan(abs(omega) / 2) / np.cos(alpha0))
+        straight, zigzag = Y[1, 2] - Y[1, 0], Y[2, 1] - Y[0, 1]
+        e_a, e_b = Y[1, 1] - Y[1, 0], Y[1, 1] - Y[0, 1]
+    c2 = np.cos(theta) ** 2 * np.tan(alpha0) ** 2
+    H = a * np.sin(theta) * np.sin(alpha0)
+    S = b * np.cos(theta) * np.tan(alpha0) / np.sqrt(1 + c2)
+    L = a * np.sqrt(1 - np.sin(theta) ** 2 * np.sin(alpha0) ** 2)
+    V = b / np.sqrt(1 + c2)
+
+    def perp(e, d):
+        d = d / np.linalg.norm(d)
+        return np.linalg.norm(e - (e @ d) * d)
+
+    assert np.linalg.norm(straight) / 2 == pytest.approx(L, abs=1e-11)
+    assert perp(e_a, straight) == pytest.approx(H, abs=1e-11)
+    assert np.linalg.norm(zigzag) / 2 == pytest.approx(S, abs=1e-11)
+    if S > 1e-6:  # folded flat: the zig-zag closes up (S = 0) and has no direction
+        assert perp(e_b, zigzag) == pytest.approx(V, abs=1e-11)
+
+
+def test_fold_accepts_arrays_and_rejects_bad_omega():
+    pat = mg.march(small_perturbed(3, 4, seed=1))
+    om = np.linspace(-np.pi, np.pi, 5)
+    Y = mg.fold(pat, om)
+    assert Y.shape == (5, 4, 5, 3)
+    for k, w in enumerate(om):
+        np.testing.assert_allclose(Y[k], mg.fold(pat, w), atol=1e-15)
+    for bad in (np.pi + 1e-6, np.nan, np.inf, [[0.1]]):
+        with pytest.raises(rq.InputError):
+            mg.fold(pat, bad)
+
+
+# --------------------------------------------------------------- checks and errors (item 7)
+def test_fig_random_miura_lengths_fail_final_check_and_lp_lengths_march():
+    bd = rq.perturb_angles(rq.miura_boundary(10, 10), 0.05 * np.pi, seed=0)
+    with pytest.raises(rq.MarchingError) as exc:
+        mg.march(bd)
+    assert exc.value.check == "final"
+    i, j = exc.value.panel
+    assert f"panel ({i}, {j})" in str(exc.value)
+    # The named panel is the first with a non-positive side, computed here row-major by hand.
+    out = mg.pattern_function(10, 10).call(mg.boundary_inputs(bd))
+    lh, lv = out[3].full(), out[4].full()
+    bad = (lv[:, 1:] <= 0) | (lh[1:, :] <= 0)
+    first = np.argwhere(bad)[0]
+    assert (i, j) == (first[0] + 1, first[1] + 1)
+    pat = mg.march(side_length_lp(bd))
+    assert pat.lh.min() > 0 and pat.lv.min() > 0
+
+
+def raw_checks(bd):
+    """alpha_d and mu_abc of every panel straight from the graph, with no check applied."""
+    out = mg.pattern_function(bd.N, bd.M).call(mg.boundary_inputs(bd))
+    return out[6].full(), out[5].full()
+
+
+def test_first_check_failure_names_panel():
+    bd = rq.miura_boundary(3, 3, alpha0=1.2)
+    left, bottom = bd.left.copy(), bd.bottom.copy()
+    # These make alpha_a + alpha_b of panel (1, 2) small (about 1.21); alpha_c = beta(1, 3) = 1.0
+    # then leaves alpha_d = 2 pi - sum > pi there, while panel (1, 1) is fine.
+    left[1, :2] = [1.2, 0.3]
+    bottom[0, :2] = [1.2, 1.0]
+    bottom[1, :2] = [1.0, 1.0]
+    bad = rq.BoundaryData(left, bottom, bd.l_left, bd.l_bottom)
+    alpha_d, _ = raw_checks(bad)
+    assert 0 < alpha_d[0, 0] < np.pi and not 0 < alpha_d[0, 1] < np.pi
+    with pytest.raises(rq.MarchingError, match=r"first check failed at panel \(1, 2\)") as exc:
+        mg.march(bad)
+    assert (exc.value.check, exc.value.panel) == ("first", (1, 2))
+
+
+def test_second_check_failure_names_panel():
+    from scipy.optimize import brentq
+
+    bd = rq.miura_boundary(2, 3, alpha0=1.2)
+
+    def with_beta11(beta):
+        left = bd.left.copy()
+        left[0, 1] = beta
+        return rq.BoundaryData(left, bd.bottom, bd.l_left, bd.l_bottom)
+
+    # |mu_abc| = 1 at panel (1, 1) for one beta of vertex (1, 1): solve for it on the graph.
+    beta = brentq(lambda b: abs(raw_checks(with_beta11(b))[1][0, 0]) - 1, 1.2, 1.9, xtol=1e-16)
+    bad = with_beta11(beta)
+    assert abs(abs(raw_checks(bad)[1][0, 0]) - 1) < 1e-12
+    with pytest.raises(rq.MarchingError) as exc:
+        mg.march(bad)
+    assert (exc.value.check, exc.value.panel) == ("second", (1, 1))
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda d: d.update(left=d["left"][:, :2]), "shape"),
+    (lambda d: d.update(l_left=d["l_left"][:-1]), "l_left"),
+    (lambda d: d["left"].__setitem__((1, 0), np.nan), r"\(2, 1\).*alpha"),
+    (lambda d: d["bottom"].__setitem__((0, 1), 3.5), r"\(1, 2\).*beta"),
+    (lambda d: d["left"].__setitem__((0, slice(0, 2)), np.pi / 2), "pi/2"),
+    (lambda d: d["left"].__setitem__((2, 2), 1.0), r"\(3, 1\).*MV"),
+    (lambda d: d["left"].__setitem__((2, 2), 0.5), "sigma"),
+    (lambda d: d["l_bottom"].__setitem__(1, 0.0), "l_bottom"),
+    (lambda d: d["l_left"].__setitem__(0, -1.0), "l_left"),
+    (lambda d: d["l_left"].__setitem__(0, np.inf), "l_left"),
+])
+def test_invalid_boundary_data_raises(change, match):
+    bd = rq.miura_boundary(3, 3)
+    d = {k: np.array(getattr(bd, k)) for k in ("left", "bottom", "l_left", "l_bottom")}
+    change(d)
+    with pytest.raises(rq.InputError, match=match):
+        rq.BoundaryData(**d)
+
+
+def test_miura_boundary_rejects_bad_parameters():
+    for kwargs in ({"alpha0": 1.7}, {"a": -1.0}, {"layout": "diagonal"}):
+        with pytest.raises(rq.InputError):
+            rq.miura_boundary(2, 2, **kwargs)
+    with pytest.raises(rq.InputError):
+        rq.miura_boundary(0, 2)
+
+
+# --------------------------------------------------------------- derivatives
+def test_gradients_match_central_differences():
+    N, M = 4, 5
+    bd = small_perturbed(N, M, seed=2, amplitude=0.02 * np.pi)
+    f = mg.folded_function(N, M)
+    x = ca.MX.sym("x", 2 * (N + 1 + M) + N + M + 1)
+    sig = bd.sigma
+    nv = N + 1 + M
+
+    def unpack(x):
+        ang = ca.horzcat(x[:nv], x[nv:2 * nv], ca.DM(sig)).T
+        return [ang[:, :N + 1], ang[:, N + 1:], x[2 * nv:2 * nv + N].T,
+                x[2 * nv + N:2 * nv + N + M].T, x[-1]]
+
+    Y = ca.vertcat(*(ca.vec(y) for y in f.call(unpack(x))))
+    F = ca.Function("F", [x], [Y, ca.jacobian(Y, x)])
+    x0 = np.concatenate([bd.to_vector(), [1.7]])
+    rng = np.random.default_rng(0)
+    y0, J = (np.array(v.full()) for v in F(x0))
+    h = 1e-6
+    for _ in range(5):
+        d = rng.normal(size=x0.size)
+        fd = (F(x0 + h * d)[0].full() - F(x0 - h * d)[0].full()).ravel() / (2 * h)
+        jd = (J @ d).ravel()
+        assert np.linalg.norm(fd - jd) <= 1e-6 * np.linalg.norm(jd)
