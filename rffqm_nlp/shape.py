@@ -1,0 +1,245 @@
+"""Discrete shape measures: coarse-graining, finite-difference fundamental forms, rigid
+alignment and distances between a folded lattice and its target (PAPER_NOTES s.8).
+
+Lattice arguments come in one of two forms, and results come back in the same form:
+
+* an (n, m, 3) NumPy array of points;
+* a sequence of three 2-D (n, m) matrices (the x, y, z components), NumPy arrays or CasADi
+  SX/MX/DM matrices; only slicing, +, -, *, / and sqrt are used, so the functions build CasADi
+  graphs when given symbols.
+
+The lattice is the paper's integer lattice r(i, j) with parameter spacings hu (along i) and
+hv (along j), both 1 by default.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import directed_hausdorff
+
+from .errors import InputError
+from .surfaces import Surface, point_set_diameter
+
+Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
+Forms = tuple[Any, Any, Any, Any, Any, Any]
+
+_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
+
+
+# -- lattice representation ---------------------------------------------------------------
+
+
+def _split(P: Lattice) -> tuple[list, bool]:
+    """(components [x, y, z], stacked) where stacked says P was an (n, m, 3) array."""
+    if isinstance(P, np.ndarray) and P.ndim == 3:
+        if P.shape[2] != 3:
+            raise InputError(f"a lattice array must have shape (n, m, 3), got {P.shape}")
+        return [P[..., k] for k in range(3)], True
+    if isinstance(P, Sequence) and len(P) == 3:
+        comps = [c if isinstance(c, _CASADI_TYPES) else np.asarray(c, dtype=float) for c in P]
+        if any(len(c.shape) != 2 or c.shape != comps[0].shape for c in comps):
+            raise InputError("a lattice given by components needs three 2-D matrices of one "
+                             f"shape, got shapes {[tuple(c.shape) for c in comps]}")
+        return comps, False
+    raise InputError("a lattice must be an (n, m, 3) array or a sequence of three (n, m) "
+                     f"matrices (x, y, z), got {type(P).__name__}")
+
+
+def _join(comps: Sequence[Any], stacked: bool) -> Any:
+    """Components back into the caller's form (an (..., 3) array or a tuple)."""
+    return np.stack(comps, axis=-1) if stacked else tuple(comps)
+
+
+def _sqrt(x: Any) -> Any:
+    return ca.sqrt(x) if isinstance(x, _CASADI_TYPES) else np.sqrt(x)
+
+
+def _dot(a: Sequence[Any], b: Sequence[Any]) -> Any:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: Sequence[Any], b: Sequence[Any]) -> list:
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _shift(c: Any, di: int, dj: int, n: int, m: int, ci: int = 1, cj: int = 1) -> Any:
+    """c[i+di, j+dj] for the rows i in ci..n-1-ci and the columns j in cj..m-1-cj."""
+    return c[ci + di:n - ci + di, cj + dj:m - cj + dj]
+
+
+def coarse_grain(Y: Lattice) -> Lattice:
+    """r(i, j) = y^{(2i)(2j)}: every second vertex of a (2N+1, 2M+1) folded lattice, giving
+    (N+1, M+1) points (PAPER_NOTES s.8; indices from 0)."""
+    comps, stacked = _split(Y)
+    n, m = comps[0].shape
+    if n % 2 == 0 or m % 2 == 0:
+        raise InputError(f"coarse_grain needs a (2N+1, 2M+1) vertex lattice (odd sizes, from "
+                         f"2N x 2M panels), got {n} x {m}")
+    return _join([c[0:n:2, 0:m:2] for c in comps], stacked)
+
+
+# -- finite differences -------------------------------------------------------------------
+
+
+def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
+    """Discrete (E, F, G, L, M, N) at the interior points, each (n-2, m-2).
+
+    Central differences r_u = (r[i+1,j] - r[i-1,j]) / (2 hu), r_v likewise,
+    r_uu = (r[i+1,j] - 2 r[i,j] + r[i-1,j]) / hu^2, r_vv likewise,
+    r_uv = (r[i+1,j+1] - r[i+1,j-1] - r[i-1,j+1] + r[i-1,j-1]) / (4 hu hv), unit normal
+    n = r_u x r_v / |r_u x r_v|; E = r_u.r_u, F = r_u.r_v, G = r_v.r_v, L = r_uu.n,
+    M = r_uv.n, N = r_vv.n. Second-order accurate in hu, hv. The stencils skip the centre
+    point in r_u, r_v and only see second differences through n, so this loss alone is blind
+    to tangential offsets between the four parity classes (i mod 2, j mod 2): combine it with
+    :func:`edge_vectors` terms (PAPER_NOTES s.8).
+    """
+    comps, _ = _split(P)
+    n, m = comps[0].shape
+    if n < 3 or m < 3:
+        raise InputError(f"fundamental_forms needs a lattice of at least 3 x 3 points, got "
+                         f"{n} x {m}")
+
+    def at(di: int, dj: int) -> list:
+        return [_shift(c, di, dj, n, m) for c in comps]
+
+    c0, ip, im, jp, jm = at(0, 0), at(1, 0), at(-1, 0), at(0, 1), at(0, -1)
+    pp, pm, mp, mm = at(1, 1), at(1, -1), at(-1, 1), at(-1, -1)
+    r_u = [(a - b) / (2 * hu) for a, b in zip(ip, im)]
+    r_v = [(a - b) / (2 * hv) for a, b in zip(jp, jm)]
+    r_uu = [(a - 2 * c + b) / hu**2 for a, c, b in zip(ip, c0, im)]
+    r_vv = [(a - 2 * c + b) / hv**2 for a, c, b in zip(jp, c0, jm)]
+    r_uv = [(a - b - c + d) / (4 * hu * hv) for a, b, c, d in zip(pp, pm, mp, mm)]
+    cross = _cross(r_u, r_v)
+    norm = _sqrt(_dot(cross, cross))
+    normal = [c / norm for c in cross]
+    return (_dot(r_u, r_u), _dot(r_u, r_v), _dot(r_v, r_v),
+            _dot(r_uu, normal), _dot(r_uv, normal), _dot(r_vv, normal))
+
+
+def _edges(comps: Sequence[Any]) -> tuple[list, list]:
+    n, m = comps[0].shape
+    d_i = [c[1:n, 0:m] - c[0:n - 1, 0:m] for c in comps]
+    d_j = [c[0:n, 1:m] - c[0:n, 0:m - 1] for c in comps]
+    return d_i, d_j
+
+
+def edge_vectors(P: Lattice) -> tuple[Any, Any]:
+    """(d_i, d_j): r[i+1, j] - r[i, j] for all (n-1) x m pairs along i and
+    r[i, j+1] - r[i, j] for all n x (m-1) pairs along j, boundary included.
+
+    Forward differences join neighbouring parity classes, so terms built on them (lengths,
+    directions) see the sideways offsets that central differences miss (PAPER_NOTES s.8).
+    """
+    comps, stacked = _split(P)
+    d_i, d_j = _edges(comps)
+    return _join(d_i, stacked), _join(d_j, stacked)
+
+
+def edge_lengths(P: Lattice) -> tuple[Any, Any]:
+    """Lengths of :func:`edge_vectors`: ((n-1, m), (n, m-1)) distances between neighbours."""
+    d_i, d_j = _edges(_split(P)[0])
+    return _sqrt(_dot(d_i, d_i)), _sqrt(_dot(d_j, d_j))
+
+
+def second_differences(P: Lattice) -> tuple[Any, Any]:
+    """(d_ii, d_jj): r[i+1,j] - 2 r[i,j] + r[i-1,j] for all (n-2) x m points with both
+    i-neighbours (boundary columns included) and the same along j, n x (m-2).
+
+    Unscaled (multiply by 1/h^2 for r_uu, r_vv); they carry the bending along the boundary
+    rows and columns that :func:`fundamental_forms` leaves out.
+    """
+    comps, stacked = _split(P)
+    n, m = comps[0].shape
+    d_ii = [c[2:n, 0:m] - 2 * c[1:n - 1, 0:m] + c[0:n - 2, 0:m] for c in comps]
+    d_jj = [c[0:n, 2:m] - 2 * c[0:n, 1:m - 1] + c[0:n, 0:m - 2] for c in comps]
+    return _join(d_ii, stacked), _join(d_jj, stacked)
+
+
+# -- rigid alignment ----------------------------------------------------------------------
+
+
+def _points(P: Any, what: str) -> tuple[np.ndarray, tuple[int, ...]]:
+    """(k, 3) numeric points of a (k, 3) array, an (n, m, 3) lattice or a component triple,
+    and the (..., 3) shape they came in."""
+    if isinstance(P, Sequence) and len(P) == 3 and np.ndim(P[0]) == 2:
+        P = np.stack([np.asarray(c, dtype=float) for c in P], axis=-1)
+    arr = np.asarray(P, dtype=float)
+    if arr.shape[-1:] != (3,) or arr.ndim < 2:
+        raise InputError(f"{what} must be points of shape (k, 3) or (n, m, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{what} contains NaN or inf")
+    return arr.reshape(-1, 3), arr.shape
+
+
+def kabsch(P: Any, Q: Any, reflection: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+    """(R, t, rms) minimising sum_k |R p_k + t - q_k|^2 over rotations R (orthogonal R if
+    ``reflection``) and translations t, for corresponding points P, Q ((k, 3) or lattices);
+    rms = sqrt(mean_k |R p_k + t - q_k|^2)."""
+    (p, _), (q, _) = _points(P, "P"), _points(Q, "Q")
+    if p.shape != q.shape:
+        raise InputError(f"kabsch needs corresponding points, got {len(p)} and {len(q)}")
+    pc, qc = p.mean(axis=0), q.mean(axis=0)
+    u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+    d = np.ones(3)
+    if not reflection:
+        d[2] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    R = vt.T @ np.diag(d) @ u.T
+    t = qc - R @ pc
+    rms = float(np.sqrt(np.mean(np.sum((p @ R.T + t - q) ** 2, axis=1))))
+    return R, t, rms
+
+
+def align(P: Any, Q: Any, reflection: bool = False) -> np.ndarray:
+    """P moved rigidly (see :func:`kabsch`) onto Q, in P's (k, 3) or (n, m, 3) shape."""
+    R, t, _ = kabsch(P, Q, reflection)
+    p, shape = _points(P, "P")
+    return (p @ R.T + t).reshape(shape)
+
+
+# -- distances ----------------------------------------------------------------------------
+
+
+def _distances(points: Any, target: Surface | Any) -> np.ndarray:
+    """Distance from each point to the target surface (closest point) or point set."""
+    pts = _points(points, "points")[0]
+    if isinstance(target, Surface):
+        return target.closest_points(pts)[2]
+    return cKDTree(_points(target, "target points")[0]).query(pts)[0]
+
+
+def rms_distance(points: Any, target: Surface | Any) -> float:
+    """sqrt(mean d^2) of the distances d from each point to the target.
+
+    For a Surface, d is the distance to its closest point over the domain
+    (:meth:`Surface.closest_points`: nearest point of a 101 x 101 sample, refined by
+    Gauss-Newton on r(u, v), accurate to round-off); for a point set, to the nearest point.
+    Points are not aligned first: use :func:`align` for that.
+    """
+    d = _distances(points, target)
+    return float(np.sqrt(np.mean(d**2)))
+
+
+def hausdorff_distance(points: Any, target: Surface | Any) -> float:
+    """Hausdorff distance: one-sided max_p dist(p, surface) for a Surface target (closest
+    points as in :func:`rms_distance`), symmetric for two point sets."""
+    if isinstance(target, Surface):
+        return float(_distances(points, target).max())
+    p, q = _points(points, "points")[0], _points(target, "target points")[0]
+    return float(max(directed_hausdorff(p, q)[0], directed_hausdorff(q, p)[0]))
+
+
+def relative_fit(points: Any, target: Surface | Any) -> dict[str, float]:
+    """{"rms": ..., "hausdorff": ...} of :func:`rms_distance` and :func:`hausdorff_distance`
+    divided by the target's diameter (:meth:`Surface.diameter`, or the largest distance
+    between two target points)."""
+    diameter = (target.diameter() if isinstance(target, Surface)
+                else point_set_diameter(_points(target, "target points")[0]))
+    if diameter <= 0:
+        raise InputError("the target has zero diameter, so a relative fit is undefined")
+    return {"rms": rms_distance(points, target) / diameter,
+            "hausdorff": hausdorff_distance(points, target) / diameter}

@@ -1,0 +1,760 @@
+"""Parametric target surfaces r(u, v) for the inverse design (PAPER_NOTES s.8).
+
+A surface is a map r(u, v) on a rectangular parameter domain ((u0, u1), (v0, v1)), written
+once with operations that work on NumPy arrays and on CasADi symbols alike (:func:`mathlib`).
+Everything derived from it (r_u, r_v, the unit normal, the fundamental forms, the curvatures)
+comes from automatic differentiation of r: one CasADi SX graph per surface, built on first
+use and evaluated vectorised on arrays of (u, v) by passing row vectors.
+
+Conventions:
+
+* u runs along the pattern's i direction (rows), v along j (columns).
+* Unit normal n = r_u x r_v / |r_u x r_v|; first form E = r_u.r_u, F = r_u.r_v, G = r_v.r_v;
+  second form L = r_uu.n, M = r_uv.n, N = r_vv.n; Gaussian curvature
+  K = (LN - M^2) / (EG - F^2); mean curvature H = (EN - 2FM + GL) / (2(EG - F^2)). So H < 0
+  where the surface bends away from n (a sphere with outward normal has H = -1/R).
+
+Built-ins (:func:`names`, :func:`get`) validate their parameters and domain on construction,
+users add their own with :class:`Custom`, and a design file's ``[target]`` table names one
+of either (:func:`from_config`, :func:`load`, :meth:`Surface.to_config`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import trimesh
+from scipy.optimize import brentq
+from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial.distance import pdist
+
+from .errors import SurfaceError
+
+Domain = tuple[tuple[float, float], tuple[float, float]]
+
+_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
+_NUMPY_MATH = SimpleNamespace(sin=np.sin, cos=np.cos, tan=np.tan, sqrt=np.sqrt, exp=np.exp,
+                              log=np.log, sinh=np.sinh, cosh=np.cosh, tanh=np.tanh,
+                              atan2=np.arctan2, pi=math.pi)
+_CASADI_MATH = SimpleNamespace(sin=ca.sin, cos=ca.cos, tan=ca.tan, sqrt=ca.sqrt, exp=ca.exp,
+                               log=ca.log, sinh=ca.sinh, cosh=ca.cosh, tanh=ca.tanh,
+                               atan2=ca.atan2, pi=math.pi)
+
+#: Grid (per direction) on which a new surface is checked to be finite and regular.
+_CHECK_GRID = 21
+#: Grid (per direction) of the sample whose largest point distance is the diameter.
+_DIAMETER_GRID = 101
+#: |r_u x r_v| below this times mean |r_u| * mean |r_v| counts as singular.
+_REGULARITY_TOL = 1e-9
+
+
+def mathlib(*args: Any) -> SimpleNamespace:
+    """Math functions for ``args``: CasADi's if any argument is a CasADi type, else NumPy's.
+
+    Both namespaces have ``sin, cos, tan, sqrt, exp, log, sinh, cosh, tanh, atan2, pi``.
+    """
+    return _CASADI_MATH if any(isinstance(a, _CASADI_TYPES) for a in args) else _NUMPY_MATH
+
+
+class Surface:
+    """A regular parametric surface r(u, v) on a rectangular domain.
+
+    Subclasses only provide ``_r(u, v)`` (returning (x, y, z) with :func:`mathlib` math);
+    construction validates the domain and checks that r is finite and regular on a grid.
+    """
+
+    def __init__(self, name: str, params: Mapping[str, float], domain: Any):
+        self.name = name
+        self.params = dict(params)
+        self.domain = _check_domain(domain)
+        self._check_regular()
+
+    def _r(self, u: Any, v: Any) -> tuple[Any, Any, Any]:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
+        return f"<Surface {self.name}({args}) on {self.domain}>"
+
+    # -- the AD graph -------------------------------------------------------------------
+    @cached_property
+    def _functions(self) -> tuple[ca.Function, ca.Function]:
+        """(r, geometry) CasADi Functions of (u, v), built once from one SX graph."""
+        u, v = ca.SX.sym("u"), ca.SX.sym("v")
+        r = ca.vertcat(*self._r(u, v))
+        r_u, r_v = ca.jacobian(r, u), ca.jacobian(r, v)
+        r_uu, r_uv, r_vv = ca.jacobian(r_u, u), ca.jacobian(r_u, v), ca.jacobian(r_v, v)
+        cross = ca.cross(r_u, r_v)
+        n = cross / ca.norm_2(cross)
+        e, f, g = ca.dot(r_u, r_u), ca.dot(r_u, r_v), ca.dot(r_v, r_v)
+        l, m, nn = ca.dot(r_uu, n), ca.dot(r_uv, n), ca.dot(r_vv, n)
+        det = e * g - f * f
+        k = (l * nn - m * m) / det
+        h = (e * nn - 2 * f * m + g * l) / (2 * det)
+        point = ca.Function("r", [u, v], [r], ["u", "v"], ["r"])
+        geometry = ca.Function(
+            "geometry", [u, v], [r, r_u, r_v, n, ca.vertcat(e, f, g, l, m, nn), k, h],
+            ["u", "v"], ["r", "r_u", "r_v", "n", "forms", "K", "H"])
+        return point, geometry
+
+    def casadi_function(self) -> ca.Function:
+        """The CasADi Function (u, v) -> r (3x1), for use inside other CasADi graphs."""
+        return self._functions[0]
+
+    def _evaluate(self, fn: ca.Function, u: Any, v: Any) -> tuple[tuple[int, ...], list]:
+        """Evaluate ``fn`` at the broadcast of u, v: (shape, outputs as (rows, n) arrays).
+
+        Raises SurfaceError where an output is not finite (outside the domain, singular)."""
+        uu, vv = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
+        if uu.size == 0:
+            return uu.shape, [np.zeros((fn.size1_out(k), 0)) for k in range(fn.n_out())]
+        # row vectors of n columns make CasADi evaluate fn n times (no Python loop)
+        out = fn.call([uu.reshape(1, -1), vv.reshape(1, -1)])
+        arrays = [np.array(o, dtype=float).reshape(-1, uu.size) for o in out]
+        finite = np.all([np.all(np.isfinite(a), axis=0) for a in arrays], axis=0)
+        if not finite.all():
+            k = int(np.argmin(finite))
+            raise SurfaceError(
+                f"surface {self.name!r} is undefined or singular at (u, v) = "
+                f"({uu.flat[k]:.6g}, {vv.flat[k]:.6g}); use (u, v) inside the domain "
+                f"{self.domain}, or shrink the domain to stay away from the singularity")
+        return uu.shape, arrays
+
+    # -- pointwise quantities -----------------------------------------------------------
+    def point(self, u: Any, v: Any) -> np.ndarray:
+        """r(u, v) with shape broadcast(u, v).shape + (3,)."""
+        shape, (r,) = self._evaluate(self._functions[0], u, v)
+        return r.T.reshape(shape + (3,))
+
+    def _geometry(self, u: Any, v: Any) -> tuple[tuple[int, ...], list]:
+        return self._evaluate(self._functions[1], u, v)
+
+    def derivatives(self, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(r_u, r_v), each broadcast(u, v).shape + (3,)."""
+        shape, out = self._geometry(u, v)
+        return out[1].T.reshape(shape + (3,)), out[2].T.reshape(shape + (3,))
+
+    def normal(self, u: Any, v: Any) -> np.ndarray:
+        """Unit normal r_u x r_v / |r_u x r_v|, shape broadcast(u, v).shape + (3,)."""
+        shape, out = self._geometry(u, v)
+        return out[3].T.reshape(shape + (3,))
+
+    def fundamental_forms(self, u: Any, v: Any) -> tuple[np.ndarray, ...]:
+        """(E, F, G, L, M, N), each shaped like the broadcast of u, v (module docstring)."""
+        shape, out = self._geometry(u, v)
+        return tuple(row.reshape(shape) for row in out[4])
+
+    def gaussian_curvature(self, u: Any, v: Any) -> np.ndarray:
+        """K = (LN - M^2) / (EG - F^2), shaped like the broadcast of u, v."""
+        shape, out = self._geometry(u, v)
+        return out[5].reshape(shape)
+
+    def mean_curvature(self, u: Any, v: Any) -> np.ndarray:
+        """H = (EN - 2FM + GL) / (2(EG - F^2)) with n = r_u x r_v / |r_u x r_v|."""
+        shape, out = self._geometry(u, v)
+        return out[6].reshape(shape)
+
+    # -- samples, lattices, meshes ------------------------------------------------------
+    def grid_uv(self, n_u: int, n_v: int) -> tuple[np.ndarray, np.ndarray]:
+        """(u (n_u,), v (n_v,)): uniform parameter values over the whole domain."""
+        n_u, n_v = _positive_int(n_u, "n_u", 2), _positive_int(n_v, "n_v", 2)
+        (u0, u1), (v0, v1) = self.domain
+        return np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v)
+
+    def sample(self, n_u: int, n_v: int) -> np.ndarray:
+        """Points on the uniform (n_u, n_v) parameter grid over the whole domain, (n_u, n_v, 3)."""
+        u, v = self.grid_uv(n_u, n_v)
+        return self.point(u[:, None], v[None, :])
+
+    def mesh(self, n_u: int, n_v: int) -> trimesh.Trimesh:
+        """Triangle mesh of :meth:`sample`; vertex (a, b) has index a*n_v + b, and every
+        triangle is oriented so that its normal agrees with r_u x r_v."""
+        points = self.sample(n_u, n_v)
+        return trimesh.Trimesh(vertices=points.reshape(-1, 3), faces=grid_faces(n_u, n_v),
+                               process=False)
+
+    def diameter(self) -> float:
+        """Largest distance between two points of the 101 x 101 :meth:`sample` (cached)."""
+        return self._diameter
+
+    @cached_property
+    def _diameter(self) -> float:
+        return point_set_diameter(self.sample(_DIAMETER_GRID, _DIAMETER_GRID))
+
+    def lattice_uv(self, N: int, M: int,
+                   spacing: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters (u (N+1,), v (M+1,)) of the lattice (0..N) x (0..M) (PAPER_NOTES s.8).
+
+        With ``spacing=None`` the lattice spans the whole domain, uniform in parameter space.
+        With ``spacing=(s_i, s_j)`` it spans a sub-rectangle centred in the domain, uniform in
+        parameter space, whose half-extents are chosen (brentq, alternating between the two
+        directions) so that the mean distance between lattice neighbours along i is s_i and
+        along j is s_j.
+        """
+        N, M = _positive_int(N, "N", 1), _positive_int(M, "M", 1)
+        if spacing is None:
+            return self.grid_uv(N + 1, M + 1)
+        s_i, s_j = _check_spacing(spacing)
+        (u0, u1), (v0, v1) = self.domain
+        uc, vc, a_max, b_max = (u0 + u1) / 2, (v0 + v1) / 2, (u1 - u0) / 2, (v1 - v0) / 2
+
+        def mean_steps(a: float, b: float) -> tuple[float, float]:
+            u, v = np.linspace(uc - a, uc + a, N + 1), np.linspace(vc - b, vc + b, M + 1)
+            return mean_neighbour_distances(self.point(u[:, None], v[None, :]))
+
+        most = mean_steps(a_max, b_max)
+        if s_i > most[0] or s_j > most[1]:
+            raise SurfaceError(
+                f"spacing ({s_i:.6g}, {s_j:.6g}) does not fit: the domain {self.domain} of "
+                f"{self.name!r} holds a {N} x {M} lattice with mean neighbour distances up to "
+                f"({most[0]:.6g}, {most[1]:.6g}); use a smaller spacing, fewer panels or a "
+                f"larger domain")
+        a, b = a_max, b_max
+        for _ in range(200):
+            a_new = _solve_extent(lambda x: mean_steps(x, b)[0] - s_i, a_max)
+            b_new = _solve_extent(lambda y: mean_steps(a_new, y)[1] - s_j, b_max)
+            done = abs(a_new - a) <= 1e-14 * a_max and abs(b_new - b) <= 1e-14 * b_max
+            a, b = a_new, b_new
+            if done:
+                break
+        d_i, d_j = mean_steps(a, b)
+        if abs(d_i - s_i) > 1e-10 * s_i or abs(d_j - s_j) > 1e-10 * s_j:
+            raise SurfaceError(
+                f"spacing ({s_i:.6g}, {s_j:.6g}) could not be matched on {self.name!r} (reached "
+                f"({d_i:.6g}, {d_j:.6g})); use a smaller spacing or a larger domain")
+        return np.linspace(uc - a, uc + a, N + 1), np.linspace(vc - b, vc + b, M + 1)
+
+    def lattice(self, N: int, M: int, spacing: tuple[float, float] | None = None) -> np.ndarray:
+        """Points r(u_i, v_j) of :meth:`lattice_uv`, shape (N+1, M+1, 3)."""
+        u, v = self.lattice_uv(N, M, spacing)
+        return self.point(u[:, None], v[None, :])
+
+    def closest_points(self, points: Any, resolution: int = 101
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest points of the surface (over its domain) to ``points`` (..., 3).
+
+        A nearest-neighbour search on the (resolution x resolution) :meth:`sample` gives the
+        start, then projected Gauss-Newton on |r(u, v) - p|^2 with the AD derivatives and the
+        domain as box constraints converges to the closest point (to round-off for points
+        whose closest point is regular). Returns (uv (..., 2), closest (..., 3),
+        distances (...)).
+        """
+        pts = np.asarray(points, dtype=float)
+        if pts.shape[-1:] != (3,) or not np.all(np.isfinite(pts)):
+            raise SurfaceError(f"points must be a finite array of shape (..., 3), got shape "
+                               f"{pts.shape}")
+        shape, pts = pts.shape[:-1], pts.reshape(-1, 3)
+        u, v = self.grid_uv(resolution, resolution)
+        _, idx = cKDTree(self.sample(resolution, resolution).reshape(-1, 3)).query(pts)
+        uu, vv = u[idx // resolution], v[idx % resolution]
+        for _ in range(100):
+            uu, vv, moved = self._projection_step(pts, uu, vv)
+            if moved <= 1e-15:
+                break
+        closest = self.point(uu, vv)
+        dist = np.linalg.norm(closest - pts, axis=1)
+        return (np.stack([uu, vv], -1).reshape(shape + (2,)), closest.reshape(shape + (3,)),
+                dist.reshape(shape))
+
+    def _projection_step(self, pts: np.ndarray, uu: np.ndarray, vv: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, float]:
+        """One projected Gauss-Newton step with step halving; returns (u, v, largest move
+        relative to the domain size)."""
+        (u0, u1), (v0, v1) = self.domain
+        _, (r, r_u, r_v, *_rest) = self._geometry(uu, vv)
+        r, r_u, r_v = r.T, r_u.T, r_v.T
+        res = r - pts
+        g_u, g_v = np.sum(r_u * res, 1), np.sum(r_v * res, 1)
+        e, f, g = np.sum(r_u * r_u, 1), np.sum(r_u * r_v, 1), np.sum(r_v * r_v, 1)
+        det = e * g - f * f
+        du, dv = -(g * g_u - f * g_v) / det, -(e * g_v - f * g_u) / det
+        # a bound is active where the point sits on it and descent leads outside
+        fix_u = ((uu <= u0) & (g_u > 0)) | ((uu >= u1) & (g_u < 0))
+        fix_v = ((vv <= v0) & (g_v > 0)) | ((vv >= v1) & (g_v < 0))
+        du, dv = np.where(fix_v, -g_u / e, du), np.where(fix_u, -g_v / g, dv)
+        du, dv = np.where(fix_u, 0.0, du), np.where(fix_v, 0.0, dv)
+        dist = np.linalg.norm(res, axis=1)
+        t, done = np.ones_like(uu), np.zeros(uu.shape, dtype=bool)
+        new_u, new_v = uu.copy(), vv.copy()
+        for _ in range(30):
+            cu, cv = np.clip(uu + t * du, u0, u1), np.clip(vv + t * dv, v0, v1)
+            ok = ~done & (np.linalg.norm(self.point(cu, cv) - pts, axis=1) <= dist)
+            new_u[ok], new_v[ok], done = cu[ok], cv[ok], done | ok
+            if done.all():
+                break
+            t = np.where(done, t, t / 2)
+        moved = max(np.max(np.abs(new_u - uu)) / (u1 - u0), np.max(np.abs(new_v - vv)) / (v1 - v0))
+        return new_u, new_v, float(moved)
+
+    # -- configuration ------------------------------------------------------------------
+    def to_config(self) -> dict:
+        """The ``[target]`` table that :func:`from_config` turns back into this surface."""
+        return {"name": self.name, **self.params, "domain": _domain_list(self.domain)}
+
+    def _check_regular(self) -> None:
+        """Raise SurfaceError unless r is finite with r_u x r_v != 0 on a grid of the domain."""
+        u, v = self.grid_uv(_CHECK_GRID, _CHECK_GRID)
+        uu, vv = np.meshgrid(u, v, indexing="ij")
+        _, out = self._geometry(uu, vv)
+        r_u, r_v = out[1].T, out[2].T
+        area = np.linalg.norm(np.cross(r_u, r_v), axis=1)
+        typical = np.linalg.norm(r_u, axis=1).mean() * np.linalg.norm(r_v, axis=1).mean()
+        bad = area <= _REGULARITY_TOL * typical
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise SurfaceError(
+                f"surface {self.name!r} is singular (r_u x r_v = 0) at (u, v) = "
+                f"({uu.flat[k]:.6g}, {vv.flat[k]:.6g}); shrink or move the domain {self.domain}")
+
+
+def grid_faces(n_u: int, n_v: int) -> np.ndarray:
+    """Triangles of an (n_u, n_v) vertex grid (vertex (a, b) = a*n_v + b), two per cell:
+    (a,b)-(a+1,b)-(a+1,b+1) and (a,b)-(a+1,b+1)-(a,b+1), both oriented like r_u x r_v."""
+    idx = np.arange(n_u * n_v).reshape(n_u, n_v)
+    p, q, r, s = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    tri = np.stack([np.stack([p, q, r], -1), np.stack([p, r, s], -1)], axis=2)
+    return tri.reshape(-1, 3)
+
+
+def mean_neighbour_distances(points: np.ndarray) -> tuple[float, float]:
+    """Mean distance between lattice neighbours of (n, m, 3) points along i and along j."""
+    d_i = np.linalg.norm(np.diff(points, axis=0), axis=-1)
+    d_j = np.linalg.norm(np.diff(points, axis=1), axis=-1)
+    return float(d_i.mean()), float(d_j.mean())
+
+
+def point_set_diameter(points: np.ndarray) -> float:
+    """Largest distance between two of the points (any shape (..., 3)), via the convex hull."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(pts) > 50:
+        pts = pts[ConvexHull(pts, qhull_options="QJ").vertices]
+    return float(pdist(pts).max()) if len(pts) > 1 else 0.0
+
+
+class Custom(Surface):
+    """A user's surface from a callable ``fn(u, v) -> (x, y, z)``.
+
+    ``fn`` is called with CasADi SX symbols to build the AD graph, so it must use
+    CasADi-compatible math: arithmetic, ``casadi.sin`` etc., or :func:`mathlib`
+    (``m = mathlib(u, v); m.sin(u)``). It is checked once on symbols and once on numbers
+    (the domain's centre); a wrong result raises SurfaceError. ``reference`` is the
+    ``"module:function"`` it was imported from, if any (used by :meth:`to_config`).
+    """
+
+    def __init__(self, fn: Callable[[Any, Any], Any], domain: Any, name: str = "custom",
+                 reference: str | None = None):
+        if not callable(fn):
+            raise SurfaceError(f"Custom needs a callable fn(u, v) -> (x, y, z), got {fn!r}")
+        self._fn = fn
+        self.reference = reference
+        dom = _check_domain(domain)
+        _xyz(fn, ca.SX.sym("u"), ca.SX.sym("v"), "CasADi SX symbols", ca.SX)
+        centre = (sum(dom[0]) / 2, sum(dom[1]) / 2)
+        _xyz(fn, *centre, f"the numbers (u, v) = {centre}", ca.DM)
+        super().__init__(name, {}, dom)
+
+    def _r(self, u: Any, v: Any) -> tuple[Any, Any, Any]:
+        return _xyz(self._fn, u, v, "CasADi SX symbols", ca.SX)
+
+    def to_config(self) -> dict:
+        """``{"python": "module:function", "domain": ...}``; needs an importable function."""
+        ref = self.reference or _reference_of(self._fn)
+        if ref is None:
+            raise SurfaceError(
+                f"custom surface {self.name!r} was made from {self._fn!r}, which cannot be "
+                f"imported by name; define it as a module-level function and use "
+                f"python = \"module:function\" in the [target] table")
+        return {"python": ref, "domain": _domain_list(self.domain)}
+
+
+def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any, Any]:
+    """Call fn(u, v) and return its three components as 1x1 ``kind`` (SX or DM) matrices."""
+    try:
+        out = fn(u, v)
+    except Exception as err:
+        raise SurfaceError(
+            f"the surface callable raised {type(err).__name__}: {err} when called with "
+            f"{what}; write it with CasADi-compatible math (casadi.sin, ..., or "
+            f"rffqm_nlp.surfaces.mathlib)") from err
+    try:
+        parts = ca.vertsplit(ca.vec(out)) if isinstance(out, _CASADI_TYPES) else list(out)
+        parts = [kind(p) for p in parts]
+    except Exception:
+        parts = None
+    if parts is None or len(parts) != 3 or any(p.shape != (1, 1) for p in parts):
+        raise SurfaceError(
+            f"the surface callable must return three scalars (x, y, z) when called with "
+            f"{what}, got {out!r}")
+    if kind is ca.DM and not all(np.isfinite(float(p)) for p in parts):
+        raise SurfaceError(f"the surface callable returned non-finite values {out!r} at {what}")
+    return parts[0], parts[1], parts[2]
+
+
+def _reference_of(fn: Callable) -> str | None:
+    """``"module:qualname"`` if importing that gives back ``fn`` itself, else None."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
+    if not module or "<" in qualname:
+        return None
+    ref = f"{module}:{qualname}"
+    try:
+        return ref if _import_reference(ref) is fn else None
+    except SurfaceError:
+        return None
+
+
+def _import_reference(ref: str) -> Callable:
+    """Import ``"package.module:function"`` (no expression is ever evaluated)."""
+    module_name, sep, qualname = str(ref).partition(":")
+    if not sep or not module_name or not qualname:
+        raise SurfaceError(f"python = {ref!r} must have the form \"package.module:function\"")
+    try:
+        obj: Any = importlib.import_module(module_name)
+        for attr in qualname.split("."):
+            obj = getattr(obj, attr)
+    except (ImportError, AttributeError) as err:
+        raise SurfaceError(f"cannot import python = {ref!r}: {err}; check the module is on "
+                           f"sys.path and the function name is spelled right") from err
+    if not callable(obj):
+        raise SurfaceError(f"python = {ref!r} is not a callable")
+    return obj
+
+
+# -- built-in surfaces --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """A built-in: r(params, u, v), default parameters, default domain, parameter checks."""
+
+    r: Callable[[dict, Any, Any], tuple[Any, Any, Any]]
+    defaults: dict[str, float]
+    domain: Callable[[dict], Domain]
+    check: Callable[[dict, Domain], None]
+    doc: str
+
+
+class _Builtin(Surface):
+    def __init__(self, name: str, spec: _Spec, params: dict, domain: Any):
+        self._spec = spec
+        dom = _check_domain(spec.domain(params) if domain is None else domain)
+        spec.check(params, dom)
+        super().__init__(name, params, dom)
+
+    def _r(self, u: Any, v: Any) -> tuple[Any, Any, Any]:
+        return self._spec.r(self.params, u, v)
+
+
+def _positive(params: dict, *keys: str) -> None:
+    for key in keys:
+        if params[key] <= 0:
+            raise SurfaceError(f"{key} must be positive, got {params[key]}")
+
+
+def _inside_open(dom: Domain, limit: float, what: str) -> None:
+    """Both parameters must stay in (-limit, limit)."""
+    for name, (a, b) in zip("uv", dom):
+        if max(abs(a), abs(b)) >= limit:
+            raise SurfaceError(f"the {name} range {(a, b)} reaches {what} at |{name}| = "
+                               f"{limit:.6g}; keep |{name}| < {limit:.6g}")
+
+
+def _at_most_turn(dom: Domain, which: str) -> None:
+    """An angle parameter may span at most one full turn (no overlapping sheets)."""
+    a, b = dom["uv".index(which)]
+    if b - a > 2 * math.pi:
+        raise SurfaceError(f"the angle {which} spans {b - a:.6g} > 2*pi, so the surface "
+                           f"overlaps itself; use a {which} range of length <= 2*pi")
+
+
+def _gnomonic(m: SimpleNamespace, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    """Direction (tan u, tan v, 1): equiangular coordinates around the +z pole."""
+    return m.tan(u), m.tan(v), 1.0
+
+
+def _sphere_cap(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    x, y, z = _gnomonic(m, u, v)
+    s = p["radius"] / m.sqrt(x * x + y * y + z * z)
+    return s * x, s * y, s * z
+
+
+def _ellipsoid_cap(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    x, y, z = _gnomonic(m, u, v)
+    s = 1 / m.sqrt((x / p["a"]) ** 2 + (y / p["b"]) ** 2 + (z / p["c"]) ** 2)
+    return s * x, s * y, s * z
+
+
+def _hyperboloid(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    return p["a"] * m.cosh(u) * m.cos(v), p["b"] * m.cosh(u) * m.sin(v), p["c"] * m.sinh(u)
+
+
+def _vase_radius(p: dict, m: SimpleNamespace, z: Any) -> Any:
+    return p["radius"] + p["amplitude"] * m.sin(2 * math.pi * z / p["wavelength"])
+
+
+def _quarter_vase(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    rho = _vase_radius(p, m, u)
+    return rho * m.cos(v), rho * m.sin(v), u
+
+
+def _saddle(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    return u, v, u * u / (2 * p["a"]) - v * v / (2 * p["b"])
+
+
+def _paraboloid(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    return u, v, u * u / (2 * p["a"]) + v * v / (2 * p["b"])
+
+
+def _cylinder(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    return p["radius"] * m.sin(v), u, p["radius"] * m.cos(v)
+
+
+def _torus_patch(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    ring = p["R"] + p["r"] * m.cos(v)
+    return ring * m.cos(u), ring * m.sin(u), p["r"] * m.sin(v)
+
+
+def _gaussian_bump(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    m = mathlib(u, v)
+    return u, v, p["height"] * m.exp(-(u * u + v * v) / (2 * p["width"] ** 2))
+
+
+def _plane(p: dict, u: Any, v: Any) -> tuple[Any, Any, Any]:
+    return u, v, 0.0
+
+
+def _check_sphere(p: dict, dom: Domain) -> None:
+    _positive(p, "radius")
+    _inside_open(dom, math.pi / 2, "the equator (beyond the hemisphere)")
+
+
+def _check_ellipsoid(p: dict, dom: Domain) -> None:
+    _positive(p, "a", "b", "c")
+    _inside_open(dom, math.pi / 2, "the equator (beyond the half ellipsoid)")
+
+
+def _check_hyperboloid(p: dict, dom: Domain) -> None:
+    _positive(p, "a", "b", "c")
+    _at_most_turn(dom, "v")
+
+
+def _check_vase(p: dict, dom: Domain) -> None:
+    _positive(p, "radius", "wavelength")
+    if abs(p["amplitude"]) >= p["radius"]:
+        raise SurfaceError(f"|amplitude| = {abs(p['amplitude'])} must be smaller than radius = "
+                           f"{p['radius']} so that the profile radius stays positive")
+    _at_most_turn(dom, "v")
+
+
+def _check_ab(p: dict, dom: Domain) -> None:
+    _positive(p, "a", "b")
+
+
+def _check_cylinder(p: dict, dom: Domain) -> None:
+    _positive(p, "radius")
+    _at_most_turn(dom, "v")
+
+
+def _check_torus(p: dict, dom: Domain) -> None:
+    _positive(p, "R", "r")
+    if p["r"] >= p["R"]:
+        raise SurfaceError(f"the tube radius r = {p['r']} must be smaller than the centre-line "
+                           f"radius R = {p['R']} (else the torus is singular)")
+    _at_most_turn(dom, "u")
+    _at_most_turn(dom, "v")
+
+
+def _check_bump(p: dict, dom: Domain) -> None:
+    _positive(p, "width")
+
+
+def _check_nothing(p: dict, dom: Domain) -> None:
+    """The plane has no parameters to check."""
+
+
+def _fixed(dom: Domain) -> Callable[[dict], Domain]:
+    return lambda p: dom
+
+
+_BUILTINS: dict[str, _Spec] = {
+    "sphere_cap": _Spec(
+        _sphere_cap, {"radius": 4.0}, _fixed(((-0.6, 0.6), (-0.6, 0.6))), _check_sphere,
+        "Cap of the sphere of the given radius centred at the origin, around the pole "
+        "(0, 0, radius), K = 1/radius^2 > 0. r = radius * d/|d| with d = (tan u, tan v, 1): "
+        "u, v are angles (radians), |u|, |v| < pi/2 (the hemisphere)."),
+    "hyperboloid": _Spec(
+        _hyperboloid, {"a": 2.0, "b": 2.0, "c": 2.0}, _fixed(((-0.8, 0.8), (-0.8, 0.8))),
+        _check_hyperboloid,
+        "Hyperboloid of one sheet x^2/a^2 + y^2/b^2 - z^2/c^2 = 1, K < 0: "
+        "r = (a cosh u cos v, b cosh u sin v, c sinh u); u along the axis, v an angle."),
+    "quarter_vase": _Spec(
+        _quarter_vase, {"radius": 2.0, "amplitude": 0.5, "wavelength": 8.0},
+        lambda p: ((-p["wavelength"] / 4, p["wavelength"] / 4), (-math.pi / 4, math.pi / 4)),
+        _check_vase,
+        "Quarter turn of the surface of revolution with profile radius "
+        "rho(z) = radius + amplitude sin(2 pi z / wavelength): r = (rho(u) cos v, "
+        "rho(u) sin v, u). The default domain spans half a wavelength around z = 0, where "
+        "rho'' and hence K change sign."),
+    "saddle": _Spec(
+        _saddle, {"a": 4.0, "b": 4.0}, _fixed(((-2.0, 2.0), (-2.0, 2.0))), _check_ab,
+        "Hyperbolic paraboloid z = u^2/(2a) - v^2/(2b) over (x, y) = (u, v), K < 0."),
+    "cylinder": _Spec(
+        _cylinder, {"radius": 3.0}, _fixed(((-2.0, 2.0), (-0.7, 0.7))), _check_cylinder,
+        "Circular cylinder r = (radius sin v, u, radius cos v) about the y axis, K = 0, "
+        "|H| = 1/(2 radius); u along the axis, v an angle."),
+    "paraboloid": _Spec(
+        _paraboloid, {"a": 4.0, "b": 4.0}, _fixed(((-2.0, 2.0), (-2.0, 2.0))), _check_ab,
+        "Elliptic paraboloid z = u^2/(2a) + v^2/(2b) over (x, y) = (u, v), K > 0."),
+    "ellipsoid_cap": _Spec(
+        _ellipsoid_cap, {"a": 3.0, "b": 4.0, "c": 2.5}, _fixed(((-0.6, 0.6), (-0.6, 0.6))),
+        _check_ellipsoid,
+        "Cap of the ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 around (0, 0, c), the radial "
+        "projection of (tan u, tan v, 1); |u|, |v| < pi/2."),
+    "torus_patch": _Spec(
+        _torus_patch, {"R": 4.0, "r": 1.5},
+        _fixed(((-0.6, 0.6), (math.pi / 2 - 0.8, math.pi / 2 + 0.8))), _check_torus,
+        "Patch of the torus r = ((R + r cos v) cos u, (R + r cos v) sin u, r sin v), "
+        "K = cos v / (r (R + r cos v)); the default patch straddles the top circle v = pi/2, "
+        "so K changes sign."),
+    "gaussian_bump": _Spec(
+        _gaussian_bump, {"height": 1.0, "width": 1.0}, _fixed(((-3.0, 3.0), (-3.0, 3.0))),
+        _check_bump, "Graph z = height exp(-(u^2 + v^2) / (2 width^2)) over (x, y) = (u, v)."),
+    "plane": _Spec(_plane, {}, _fixed(((-2.0, 2.0), (-2.0, 2.0))), _check_nothing,
+                   "The plane z = 0 over (x, y) = (u, v)."),
+}
+
+
+def names() -> list[str]:
+    """Names of the built-in surfaces."""
+    return list(_BUILTINS)
+
+
+def describe(name: str) -> str:
+    """Description of a built-in surface, its parameters and their defaults."""
+    spec = _spec(name)
+    defaults = ", ".join(f"{k}={v}" for k, v in spec.defaults.items()) or "no parameters"
+    domain = spec.domain(spec.defaults)
+    return f"{name}: {spec.doc} Parameters: {defaults}; default domain {domain}."
+
+
+def get(name: str, domain: Any = None, **params: float) -> Surface:
+    """The built-in surface ``name`` with ``params`` overriding its defaults (see
+    :func:`describe`) and an optional domain ((u0, u1), (v0, v1))."""
+    spec = _spec(name)
+    unknown = sorted(set(params) - set(spec.defaults))
+    if unknown:
+        valid = ", ".join(spec.defaults) or "none"
+        raise SurfaceError(f"unknown parameter(s) {', '.join(unknown)} for surface {name!r}; "
+                           f"valid parameters: {valid} (and domain)")
+    values = {k: _real(params.get(k, default), k) for k, default in spec.defaults.items()}
+    return _Builtin(name, spec, values, domain)
+
+
+def _spec(name: str) -> _Spec:
+    if name not in _BUILTINS:
+        raise SurfaceError(f"unknown surface {name!r}; built-in surfaces: {', '.join(_BUILTINS)}"
+                           f" (or use python = \"module:function\" for your own)")
+    return _BUILTINS[name]
+
+
+def from_config(table: Mapping[str, Any]) -> Surface:
+    """The surface of a ``[target]`` table: ``name = "..."`` plus parameters and an optional
+    ``domain = [[u0, u1], [v0, v1]]``, or ``python = "package.module:function"`` plus a
+    required ``domain``."""
+    table = dict(table)
+    if "python" in table:
+        extra = sorted(set(table) - {"python", "domain"})
+        if extra:
+            raise SurfaceError(f"unknown key(s) {', '.join(extra)} next to python = ...; a "
+                               f"python target takes only python and domain")
+        if "domain" not in table:
+            raise SurfaceError("a python = \"module:function\" target needs "
+                               "domain = [[u0, u1], [v0, v1]]")
+        ref = table["python"]
+        return Custom(_import_reference(ref), table["domain"], reference=ref)
+    if "name" not in table:
+        raise SurfaceError("the [target] table needs name = \"<surface>\" (one of "
+                           f"{', '.join(_BUILTINS)}) or python = \"module:function\"")
+    name = table.pop("name")
+    return get(name, table.pop("domain", None), **table)
+
+
+def load(path: str | Path) -> Surface:
+    """The surface of the ``[target]`` table of a TOML design file."""
+    path = Path(path)
+    with path.open("rb") as fh:
+        try:
+            data = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as err:
+            raise SurfaceError(f"{path} is not valid TOML: {err}") from err
+    if not isinstance(data.get("target"), dict):
+        raise SurfaceError(f"{path} has no [target] table")
+    return from_config(data["target"])
+
+
+# -- validation helpers -------------------------------------------------------------------
+
+
+def _real(x: Any, what: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise SurfaceError(f"{what} must be a real number, got {x!r}")
+    if not math.isfinite(float(x)):
+        raise SurfaceError(f"{what} must be finite, got {x!r}")
+    return float(x)
+
+
+def _check_domain(domain: Any) -> Domain:
+    try:
+        (u0, u1), (v0, v1) = domain
+    except (TypeError, ValueError):
+        raise SurfaceError(f"domain must be ((u0, u1), (v0, v1)), got {domain!r}") from None
+    u0, u1, v0, v1 = (_real(x, f"domain bound {n}") for x, n in
+                      zip((u0, u1, v0, v1), ("u0", "u1", "v0", "v1")))
+    for name, a, b in (("u", u0, u1), ("v", v0, v1)):
+        if not a < b:
+            raise SurfaceError(f"the {name} range ({a}, {b}) of the domain is empty or "
+                               f"inverted; give {name}0 < {name}1")
+    return (u0, u1), (v0, v1)
+
+
+def _domain_list(dom: Domain) -> list[list[float]]:
+    return [list(dom[0]), list(dom[1])]
+
+
+def _positive_int(n: Any, what: str, least: int) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < least:
+        raise SurfaceError(f"{what} must be an integer >= {least}, got {n!r}")
+    return int(n)
+
+
+def _check_spacing(spacing: Any) -> tuple[float, float]:
+    try:
+        s_i, s_j = spacing
+    except (TypeError, ValueError):
+        raise SurfaceError(f"spacing must be (s_i, s_j), got {spacing!r}") from None
+    s_i, s_j = _real(s_i, "spacing s_i"), _real(s_j, "spacing s_j")
+    if s_i <= 0 or s_j <= 0:
+        raise SurfaceError(f"spacing must be positive, got ({s_i}, {s_j})")
+    return s_i, s_j
+
+
+def _solve_extent(residual: Callable[[float], float], most: float) -> float:
+    """Half-extent x in (0, most] with residual(x) = 0 (residual(0) < 0, increasing)."""
+    if residual(most) <= 0:
+        return most
+    return brentq(residual, 0.0, most, xtol=1e-15 * most, rtol=4 * np.finfo(float).eps)

@@ -1,0 +1,218 @@
+"""Tests of the discrete shape measures: coarse-graining, finite-difference fundamental forms
+(NumPy and CasADi), rigid alignment and distances to a surface."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import rffqm_nlp as rq
+from rffqm_nlp.errors import InputError
+
+S, sh = rq.surfaces, rq.shape
+
+
+def random_lattice(n=7, m=9, seed=1):
+    """A smooth sheet plus noise: a generic lattice with a well-defined normal."""
+    rng = np.random.default_rng(seed)
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    P = np.stack([i, j, 0.1 * (i - 3) ** 2 - 0.05 * i * j], axis=-1).astype(float)
+    return P + 0.1 * rng.standard_normal(P.shape)
+
+
+def casadi_eval(fun, P, kind=ca.MX):
+    """Evaluate ``fun`` on the components of P through a CasADi Function of symbols."""
+    n, m, _ = P.shape
+    xyz = [kind.sym(c, n, m) for c in "xyz"]
+    out = fun(xyz)
+    out = list(out) if isinstance(out, tuple) else [out]
+    flat = [o for part in out for o in (part if isinstance(part, tuple) else (part,))]
+    f = ca.Function("f", xyz, flat)
+    return [np.array(r) for r in f(*(P[..., k] for k in range(3)))]
+
+
+def numpy_flat(result):
+    parts = result if isinstance(result, tuple) else (result,)
+    flat = []
+    for part in parts:
+        flat += [part[..., k] for k in range(3)] if part.ndim == 3 else [part]
+    return flat
+
+
+def test_coarse_grain_takes_even_vertices():
+    Y = np.arange(5 * 7 * 3, dtype=float).reshape(5, 7, 3)
+    r = sh.coarse_grain(Y)
+    assert r.shape == (3, 4, 3)
+    np.testing.assert_array_equal(r[1, 2], Y[2, 4])
+    _, y, _ = sh.coarse_grain([Y[..., 0], ca.DM(Y[..., 1]), Y[..., 2]])
+    np.testing.assert_array_equal(np.array(y), Y[::2, ::2, 1])
+    with pytest.raises(InputError, match="odd sizes"):
+        sh.coarse_grain(np.zeros((4, 5, 3)))
+
+
+def test_discrete_forms_of_a_plane_lattice():
+    i, j = np.meshgrid(np.arange(5.0), np.arange(4.0), indexing="ij")
+    P = np.stack([2 * i, 3 * j, 0 * i], -1)
+    E, F, G, L, M, N = sh.fundamental_forms(P, hu=2.0, hv=0.5)
+    assert E.shape == (3, 2)
+    np.testing.assert_allclose(E, 1.0)
+    np.testing.assert_allclose(G, 36.0)
+    for form in (F, L, M, N):
+        np.testing.assert_array_equal(form, 0.0)
+    with pytest.raises(InputError, match="at least 3 x 3"):
+        sh.fundamental_forms(P[:2])
+
+
+def test_discrete_forms_converge_at_second_order_at_a_point():
+    ell = S.get("ellipsoid_cap")  # a, b, c distinct: F and M are not zero
+    u0, v0 = 0.13, 0.21
+    exact = np.array(ell.fundamental_forms(u0, v0))
+    hs = np.array([0.08, 0.04, 0.02, 0.01])
+    errors = []
+    for h in hs:
+        hu, hv = h, 1.5 * h  # unequal spacings
+        P = ell.point(u0 + hu * np.arange(-1, 2)[:, None], v0 + hv * np.arange(-1, 2)[None, :])
+        errors.append(np.abs([f[0, 0] for f in sh.fundamental_forms(P, hu, hv)] - exact))
+    slopes = np.polyfit(np.log(hs), np.log(np.array(errors)), 1)[0]
+    assert np.all((slopes > 1.9) & (slopes < 2.1)), slopes
+
+
+def test_discrete_forms_converge_at_second_order_on_lattices():
+    torus = S.get("torus_patch")
+    hs, errors = [], []
+    for n in (9, 17, 33, 65):
+        u, v = torus.lattice_uv(n - 1, n - 1)
+        P = torus.lattice(n - 1, n - 1)
+        exact = torus.fundamental_forms(u[1:-1, None], v[None, 1:-1])
+        discrete = sh.fundamental_forms(P, u[1] - u[0], v[1] - v[0])
+        errors.append(max(np.abs(d - e).max() for d, e in zip(discrete, exact)))
+        hs.append(u[1] - u[0])
+    slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
+    assert 1.8 < slope < 2.2, slope
+
+
+@pytest.mark.parametrize("kind", [ca.MX, ca.SX])
+@pytest.mark.parametrize("fun", [
+    lambda P: sh.fundamental_forms(P, 0.7, 1.3), sh.edge_vectors, sh.edge_lengths,
+    sh.second_differences, sh.coarse_grain])
+def test_casadi_path_equals_numpy_path(fun, kind):
+    P = random_lattice()
+    expected = numpy_flat(fun(P))
+    got = casadi_eval(fun, P, kind)
+    assert len(got) == len(expected)
+    for g, e in zip(got, expected):
+        assert g.shape == e.shape
+        np.testing.assert_allclose(g, e, rtol=1e-14, atol=1e-14)
+
+
+def test_edge_and_second_differences_values():
+    P = random_lattice(4, 5)
+    d_i, d_j = sh.edge_vectors(P)
+    assert d_i.shape == (3, 5, 3) and d_j.shape == (4, 4, 3)
+    np.testing.assert_array_equal(d_i[2, 4], P[3, 4] - P[2, 4])
+    np.testing.assert_array_equal(d_j[3, 0], P[3, 1] - P[3, 0])
+    l_i, l_j = sh.edge_lengths(P)
+    np.testing.assert_allclose(l_i, np.linalg.norm(d_i, axis=-1), rtol=1e-15)
+    np.testing.assert_allclose(l_j, np.linalg.norm(d_j, axis=-1), rtol=1e-15)
+    s_i, s_j = sh.second_differences(P)
+    assert s_i.shape == (2, 5, 3) and s_j.shape == (4, 3, 3)
+    np.testing.assert_allclose(s_i[0, 4], P[2, 4] - 2 * P[1, 4] + P[0, 4], rtol=1e-15)
+    np.testing.assert_allclose(s_j[3, 2], P[3, 4] - 2 * P[3, 3] + P[3, 2], rtol=1e-15)
+
+
+def test_edge_vectors_see_parity_offsets_that_central_forms_miss():
+    """PAPER_NOTES s.8: shifting one parity class sideways barely changes the central
+    forms, while the neighbour distances change at first order."""
+    P = S.get("plane").lattice(8, 8)
+    Q = P.copy()
+    Q[::2, ::2, 0] += 1e-3
+    forms = np.abs(np.array(sh.fundamental_forms(Q)) - np.array(sh.fundamental_forms(P)))
+    lengths = np.abs(sh.edge_lengths(Q)[0] - sh.edge_lengths(P)[0])
+    assert forms.max() < 1e-12 and lengths.max() > 9e-4
+
+
+def test_bad_lattices_raise_input_error():
+    with pytest.raises(InputError, match=r"\(n, m, 3\)"):
+        sh.edge_vectors(np.zeros((3, 3, 2)))
+    with pytest.raises(InputError, match="three 2-D matrices of one shape"):
+        sh.edge_vectors([np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 4))])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_kabsch_recovers_rotation_and_reflection(seed):
+    rng = np.random.default_rng(seed)
+    P = random_lattice(5, 6, seed)
+    R = Rotation.random(random_state=seed).as_matrix()
+    t = rng.normal(size=3) * 5
+    R_hat, t_hat, rms = sh.kabsch(P, P @ R.T + t)
+    np.testing.assert_allclose(R_hat, R, atol=1e-12)
+    np.testing.assert_allclose(t_hat, t, atol=1e-12)
+    assert rms < 1e-12
+    aligned = sh.align(P, P @ R.T + t)
+    assert aligned.shape == P.shape
+    np.testing.assert_allclose(aligned, P @ R.T + t, atol=1e-12)
+
+    mirror = R @ np.diag([1.0, 1.0, -1.0])
+    Q = P @ mirror.T + t
+    R_hat, t_hat, rms = sh.kabsch(P, Q, reflection=True)
+    np.testing.assert_allclose(R_hat, mirror, atol=1e-12)
+    np.testing.assert_allclose(t_hat, t, atol=1e-12)
+    assert rms < 1e-12
+    R_rot, _, rms_rot = sh.kabsch(P, Q)
+    assert np.linalg.det(R_rot) == pytest.approx(1.0) and rms_rot > 0.1
+
+
+def test_kabsch_on_points_and_component_triples():
+    P = random_lattice(4, 4).reshape(-1, 3)
+    R = Rotation.from_rotvec([0.3, -0.2, 0.9]).as_matrix()
+    R_hat, _, _ = sh.kabsch(P, P @ R.T)
+    np.testing.assert_allclose(R_hat, R, atol=1e-12)
+    L = random_lattice(4, 4)
+    aligned = sh.align([L[..., k] for k in range(3)], L @ R.T)
+    np.testing.assert_allclose(aligned, L @ R.T, atol=1e-12)
+    with pytest.raises(InputError, match="corresponding points"):
+        sh.kabsch(P, P[:-1])
+
+
+@pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "torus_patch", "quarter_vase"])
+def test_distances_vanish_on_the_surface_and_measure_normal_offsets(name):
+    surface = S.get(name)
+    rng = np.random.default_rng(3)
+    (u0, u1), (v0, v1) = surface.domain
+    # random (not grid) parameters, away from the boundary so offsets project back
+    u = u0 + (u1 - u0) * rng.uniform(0.1, 0.9, (6, 7))
+    v = v0 + (v1 - v0) * rng.uniform(0.1, 0.9, (6, 7))
+    on = surface.point(u, v)
+    fit = sh.relative_fit(on, surface)
+    assert fit["rms"] < 1e-6 and fit["hausdorff"] < 1e-6
+    assert sh.rms_distance(on, surface) < 1e-12
+    for offset in (0.05, -0.1):
+        off = on + offset * surface.normal(u, v)
+        assert sh.rms_distance(off, surface) == pytest.approx(abs(offset), rel=1e-9)
+        assert sh.hausdorff_distance(off, surface) == pytest.approx(abs(offset), rel=1e-9)
+    uv, closest, dist = surface.closest_points(on + 0.05 * surface.normal(u, v))
+    np.testing.assert_allclose(uv, np.stack([u, v], -1), atol=1e-9)
+    np.testing.assert_allclose(dist, 0.05, rtol=1e-9)
+
+
+def test_distance_to_a_point_beyond_the_domain_edge():
+    plane = S.get("plane")  # (-2, 2)^2 in z = 0
+    d = sh.hausdorff_distance(np.array([[3.0, 0.5, 4.0]]), plane)
+    assert d == pytest.approx(np.hypot(1.0, 4.0), rel=1e-12)
+    d = sh.hausdorff_distance(np.array([[3.0, -5.0, 0.0]]), plane)
+    assert d == pytest.approx(np.hypot(1.0, 3.0), rel=1e-12)
+
+
+def test_point_set_distances():
+    A = random_lattice(3, 4).reshape(-1, 3)
+    far = A[0] + np.array([0.0, 0.0, 7.0])
+    B = np.vstack([A, far])
+    assert sh.rms_distance(A, B) == 0.0
+    assert sh.hausdorff_distance(A, B) == pytest.approx(np.min(np.linalg.norm(A - far, axis=1)))
+    assert sh.hausdorff_distance(B, A) == sh.hausdorff_distance(A, B)
+    fit = sh.relative_fit(B, A)
+    diameter = max(np.linalg.norm(p - q) for p in A for q in A)
+    assert fit["hausdorff"] == pytest.approx(sh.hausdorff_distance(B, A) / diameter)
+    assert fit["rms"] == pytest.approx(sh.rms_distance(B, A) / diameter)
