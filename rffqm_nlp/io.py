@@ -1,0 +1,500 @@
+"""Files other tools open: FOLD 1.2, SVG/PDF/DXF crease patterns, OBJ/PLY/GLB folded meshes.
+
+Numbering shared by every writer: vertex (i, j) (1-based) is FOLD vertex
+``(i-1)(M+1) + (j-1)``; the edges are the horizontal edges (i, j) -> (i, j+1) row by row,
+then the vertical edges (i, j) -> (i+1, j) row by row; the faces are the panels (i, j) row
+by row, counter-clockwise a, c, d, b in the flat pattern. Boundary edges are "B"; a crease
+is a valley "V" when its fold angle at the designed state is positive, else a mountain "M"
+(at omega = 0 the signs of the positive folding branch are used).
+
+Every file is written atomically: a temporary file in the target folder, then
+:func:`os.replace`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .errors import InputError
+from .marching import check_omega, fold, fold_angles
+from .pattern import Pattern
+
+#: Stroke colours of the 2-D writers, as Origami Simulator expects on SVG import.
+COLORS: dict[str, str] = {"M": "#ff0000", "V": "#0000ff", "B": "#000000"}
+#: DXF layer and ACI colour of every kind (1 red, 5 blue, 7 white/black).
+DXF_LAYERS: dict[str, tuple[str, int]] = {"M": ("MOUNTAIN", 1), "V": ("VALLEY", 5),
+                                          "B": ("BOUNDARY", 7)}
+CREATOR = "rffqm-nlp"
+PREFIX = "rffqm:"
+ASSIGNMENTS = frozenset("BMVFU")
+#: Mesh formats of :func:`write_mesh`, by file suffix.
+MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".glb": "glb"}
+_RESERVED = ("omega", "pattern", "version")
+_ANGLE_TOL = 1e-9
+
+
+# --------------------------------------------------------------------------- files
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_umask()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path next to ``path`` (same suffix); on success move it onto ``path``.
+
+    On an exception the temporary file is removed and ``path`` is left untouched.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.chmod(tmp, _FILE_MODE)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def _write_text(path: str | os.PathLike, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+# --------------------------------------------------------------------------- numbering
+def vertex_index(N: int, M: int) -> np.ndarray:
+    """FOLD index of every vertex, (N+1, M+1)."""
+    return np.arange((N + 1) * (M + 1)).reshape(N + 1, M + 1)
+
+
+def edges_vertices(N: int, M: int) -> np.ndarray:
+    """Vertex pairs of the horizontal then the vertical edges, ((N+1)M + N(M+1), 2)."""
+    v = vertex_index(N, M)
+    horizontal = np.stack([v[:, :-1], v[:, 1:]], axis=-1).reshape(-1, 2)
+    vertical = np.stack([v[:-1, :], v[1:, :]], axis=-1).reshape(-1, 2)
+    return np.concatenate([horizontal, vertical])
+
+
+def faces_vertices(N: int, M: int) -> np.ndarray:
+    """Corners a, c, d, b of every panel (counter-clockwise in the flat pattern), (NM, 4)."""
+    v = vertex_index(N, M)
+    return np.stack([v[:-1, :-1], v[:-1, 1:], v[1:, 1:], v[1:, :-1]], axis=-1).reshape(-1, 4)
+
+
+def _boundary_mask(N: int, M: int) -> np.ndarray:
+    """True for the boundary edges, in the edge order of :func:`edges_vertices`."""
+    h = np.zeros((N + 1, M), bool)
+    h[[0, -1], :] = True
+    v = np.zeros((N, M + 1), bool)
+    v[:, [0, -1]] = True
+    return np.concatenate([h.ravel(), v.ravel()])
+
+
+def edge_fold_angles(pat: Pattern, omega: float) -> np.ndarray:
+    """Fold angle (radians, gamma > 0 valley, 0 on boundary edges) of every edge at ``omega``."""
+    gh, gv = fold_angles(pat, omega)
+    return np.concatenate([gh.ravel(), gv.ravel()])
+
+
+def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
+    """Assignment "B", "M" or "V" of every edge: the sign of its fold angle at ``omega``.
+
+    At omega = 0 every crease is flat; the signs at omega = pi/2 (the same on the whole
+    positive branch, tan(gamma/2) = k tan(omega/2)) are used instead.
+    """
+    om = float(check_omega(omega))
+    gamma = edge_fold_angles(pat, om if om != 0.0 else np.pi / 2)
+    kinds = np.where(gamma > 0, "V", "M")
+    kinds[_boundary_mask(pat.N, pat.M)] = "B"
+    return kinds
+
+
+def crease_segments(pat: Pattern, omega: float) -> list[tuple[np.ndarray, np.ndarray, str]]:
+    """Every edge of the flat pattern as (p0, p1, kind), p 2-D, kind in {"M", "V", "B"}."""
+    xy = pat.X[..., :2].reshape(-1, 2)
+    kinds = edge_assignments(pat, omega)
+    return [(xy[a].copy(), xy[b].copy(), str(k))
+            for (a, b), k in zip(edges_vertices(pat.N, pat.M), kinds)]
+
+
+# --------------------------------------------------------------------------- FOLD
+def _jsonable(value: Any) -> Any:
+    """numpy arrays and scalars -> lists and Python numbers, recursively; InputError for
+    anything JSON cannot hold."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    raise InputError(f"metadata value {value!r} ({type(value).__name__}) cannot be stored in "
+                     "JSON; use numbers, strings, lists, dicts or numpy arrays")
+
+
+def frame_omegas(omega: float, frames: int | np.ndarray | None) -> np.ndarray:
+    """The omegas of the folding frames: ``frames`` values from 0 to ``omega`` or explicit."""
+    if frames is None:
+        return np.zeros(0)
+    if isinstance(frames, (int, np.integer)):
+        if frames < 1:
+            raise InputError(f"frames must be a positive number of states, got {frames}")
+        return np.linspace(0.0, omega, int(frames))
+    return np.atleast_1d(check_omega(frames))
+
+
+def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None,
+              metadata: Mapping[str, Any] | None = None) -> dict:
+    """The FOLD 1.2 dictionary of ``pat`` designed to be folded to ``omega``.
+
+    The key frame is the flat crease pattern (2-D coordinates, assignments and fold angles
+    in degrees at ``omega``, FOLD's signs: valley positive). ``frames`` (a count K of
+    states from 0 to omega, or an array of omegas) adds ``file_frames``: each state's folded
+    3-D coordinates, assignments and fold angles, and its ``rffqm:omega``. The design data are stored under the ``rffqm:`` prefix:
+    ``rffqm:omega``, ``rffqm:pattern`` (:meth:`Pattern.to_dict`) and every key of
+    ``metadata`` as ``rffqm:<key>``.
+    """
+    if not isinstance(pat, Pattern):
+        raise InputError(f"fold_dict expects a Pattern, got {type(pat).__name__}")
+    om = float(check_omega(omega))
+    d: dict[str, Any] = {
+        "file_spec": 1.2,
+        "file_creator": CREATOR,
+        "file_classes": ["singleModel"],
+        "frame_title": f"RFFQM crease pattern, {pat.N} x {pat.M} panels",
+        "frame_classes": ["creasePattern"],
+        "frame_attributes": ["2D"],
+        "vertices_coords": pat.X[..., :2].reshape(-1, 2).tolist(),
+        "edges_vertices": edges_vertices(pat.N, pat.M).tolist(),
+        "edges_assignment": edge_assignments(pat, om).tolist(),
+        "edges_foldAngle": np.degrees(edge_fold_angles(pat, om)).tolist(),
+        "faces_vertices": faces_vertices(pat.N, pat.M).tolist(),
+    }
+    omegas = frame_omegas(om, frames)
+    if omegas.size:
+        Y = fold(pat, omegas)
+        d["file_frames"] = [{
+            "frame_classes": ["foldedForm"],
+            "frame_attributes": ["3D"],
+            "frame_parent": 0,
+            "frame_inherit": True,
+            "vertices_coords": y.reshape(-1, 3).tolist(),
+            "edges_assignment": edge_assignments(pat, w).tolist(),
+            "edges_foldAngle": np.degrees(edge_fold_angles(pat, w)).tolist(),
+            PREFIX + "omega": float(w),
+        } for w, y in zip(omegas, Y)]
+    d[PREFIX + "version"] = __version__
+    d[PREFIX + "omega"] = om
+    d[PREFIX + "pattern"] = pat.to_dict()
+    for key, value in (metadata or {}).items():
+        if key in _RESERVED:
+            raise InputError(f"metadata key {key!r} is reserved; choose another name")
+        d[PREFIX + str(key)] = _jsonable(value)
+    return d
+
+
+def write_fold(path: str | os.PathLike, pat: Pattern, omega: float,
+               frames: int | np.ndarray | None = None,
+               metadata: Mapping[str, Any] | None = None) -> Path:
+    """Write :func:`fold_dict` as a ``.fold`` JSON file; returns the path."""
+    _write_text(path, json.dumps(fold_dict(pat, omega, frames, metadata), indent=1))
+    return Path(path)
+
+
+def _array(d: Mapping, key: str, problems: list[str], dtype=float) -> np.ndarray | None:
+    """``d[key]`` as a rectangular array, or None (with a problem) when it is not one."""
+    try:
+        return np.array(d[key], dtype=dtype)
+    except (TypeError, ValueError):
+        problems.append(f"{key} is not a rectangular array of numbers")
+        return None
+
+
+def _signed_areas(xy: np.ndarray, faces: list) -> np.ndarray:
+    """Shoelace signed area of every face polygon."""
+    out = []
+    for f in faces:
+        p = xy[np.asarray(f)]
+        q = np.roll(p, -1, axis=0)
+        out.append(0.5 * np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+    return np.array(out)
+
+
+def _check_edges(d: Mapping, nv: int, problems: list[str]) -> tuple[int, np.ndarray | None]:
+    """Check edges_vertices and the per-edge data; (edge count, assignments or None)."""
+    ev = _array(d, "edges_vertices", problems, dtype=int)
+    if ev is None:
+        return 0, None
+    if ev.ndim != 2 or ev.shape[1] != 2:
+        problems.append(f"edges_vertices must be a list of vertex pairs, got shape {ev.shape}")
+        return 0, None
+    if ev.size and (ev.min() < 0 or ev.max() >= nv):
+        problems.append(f"edges_vertices has indices outside [0, {nv})")
+    if np.any(ev[:, 0] == ev[:, 1]):
+        problems.append("edges_vertices has an edge from a vertex to itself")
+    return len(ev), _check_edge_data(d, len(ev), None, "", problems)
+
+
+def _check_edge_data(d: Mapping, ne: int, inherited: np.ndarray | None, where: str,
+                     problems: list[str]) -> np.ndarray | None:
+    """Check edges_assignment and edges_foldAngle of the key frame or of a frame (``where``
+    prefixes the messages); returns the assignments in force (own or ``inherited``)."""
+    asg = inherited
+    if "edges_assignment" in d:
+        own = d["edges_assignment"]
+        asg = None
+        if not isinstance(own, list) or len(own) != ne:
+            problems.append(f"{where}edges_assignment must list one assignment per edge ({ne})")
+        elif bad := sorted({repr(a) for a in own
+                            if not (isinstance(a, str) and a in ASSIGNMENTS)}):
+            problems.append(f"{where}edges_assignment has values {', '.join(bad)} outside "
+                            f"{sorted(ASSIGNMENTS)}")
+        else:
+            asg = np.array(own)
+    if "edges_foldAngle" in d:
+        ang = _array(d, "edges_foldAngle", problems)
+        if ang is not None and ang.shape != (ne,):
+            problems.append(f"{where}edges_foldAngle must list one angle per edge ({ne})")
+        elif ang is not None:
+            if not np.all(np.abs(ang) <= 180):
+                problems.append(f"{where}edges_foldAngle has angles outside [-180, 180] degrees")
+            if asg is not None:
+                _check_angle_signs(asg, ang, where, problems)
+    return asg
+
+
+def _check_angle_signs(asg: np.ndarray, ang: np.ndarray, where: str,
+                       problems: list[str]) -> None:
+    """FOLD's convention: valley >= 0, mountain <= 0, boundary and flat exactly 0."""
+    rules = {"V": ang < -_ANGLE_TOL, "M": ang > _ANGLE_TOL, "B": np.abs(ang) > _ANGLE_TOL,
+             "F": np.abs(ang) > _ANGLE_TOL}
+    for kind, bad in rules.items():
+        idx = np.flatnonzero((asg == kind) & bad)
+        if idx.size:
+            problems.append(f"{where}edges_foldAngle disagrees with assignment {kind!r} at edge "
+                            f"{int(idx[0])} ({idx.size} edges)")
+
+
+def _check_faces(d: Mapping, coords: np.ndarray, problems: list[str]) -> None:
+    faces = d["faces_vertices"]
+    nv = len(coords)
+    if not isinstance(faces, list) or not all(isinstance(f, list) for f in faces):
+        problems.append("faces_vertices must be a list of vertex lists")
+        return
+    if any(len(f) < 3 or not all(isinstance(k, int) and not isinstance(k, bool) for k in f)
+           for f in faces):
+        problems.append("faces_vertices must list at least three integer vertex indices per face")
+        return
+    if any(k < 0 or k >= nv for f in faces for k in f):
+        problems.append(f"faces_vertices has indices outside [0, {nv})")
+        return
+    area = _signed_areas(coords[:, :2], faces)
+    cw = np.flatnonzero(area <= 0)
+    if cw.size:
+        problems.append(f"faces_vertices: face {int(cw[0])} is not counter-clockwise "
+                        f"({cw.size} faces)")
+
+
+def _check_frames(d: Mapping, nv: int, ne: int, asg: np.ndarray | None,
+                  problems: list[str]) -> None:
+    """Check every frame's parent, vertex count and per-edge data (assignments inherited)."""
+    frames = d["file_frames"]
+    if not isinstance(frames, list) or not all(isinstance(f, dict) for f in frames):
+        problems.append("file_frames must be a list of frame objects")
+        return
+    for k, frame in enumerate(frames, start=1):
+        where = f"file_frames[{k - 1}]: "
+        parent = frame.get("frame_parent", 0)
+        if not isinstance(parent, int) or not 0 <= parent <= len(frames) or parent == k:
+            problems.append(f"{where}frame_parent {parent!r} is not another frame")
+        if "vertices_coords" in frame:
+            xyz = _array(frame, "vertices_coords", problems)
+            if xyz is not None and (xyz.ndim != 2 or xyz.shape[0] != nv):
+                problems.append(f"{where}vertices_coords has shape {xyz.shape}, the key "
+                                f"frame {nv} vertices")
+        if ne:
+            _check_edge_data(frame, ne, asg, where, problems)
+
+
+def validate_fold(d: Any) -> list[str]:
+    """Structural problems of a FOLD dictionary ([] when none).
+
+    Checks the required keys, vertex coordinates (2-D or 3-D, finite), edge and face index
+    ranges, per-edge list lengths, assignments in {B, M, V, F, U}, fold angles agreeing with
+    the assignments (valley >= 0, mountain <= 0, boundary and flat 0), faces
+    counter-clockwise by the signed area of the flat coordinates, and every frame's parent,
+    vertex count and per-edge data (assignments inherited from the key frame).
+    """
+    if not isinstance(d, Mapping):
+        return [f"a FOLD file holds a JSON object, got {type(d).__name__}"]
+    required = ("file_spec", "vertices_coords", "edges_vertices", "edges_assignment",
+                "faces_vertices")
+    problems = [f"missing key {k!r}" for k in required if k not in d]
+    if "vertices_coords" not in d:
+        return problems
+    coords = _array(d, "vertices_coords", problems)
+    if coords is None:
+        return problems
+    if coords.ndim != 2 or coords.shape[1] not in (2, 3) or len(coords) == 0:
+        problems.append(f"vertices_coords must be a list of 2-D or 3-D points, "
+                        f"got shape {coords.shape}")
+        return problems
+    if not np.all(np.isfinite(coords)):
+        problems.append("vertices_coords has non-finite coordinates")
+    ne, asg = _check_edges(d, len(coords), problems) if "edges_vertices" in d else (0, None)
+    if "faces_vertices" in d:
+        _check_faces(d, coords, problems)
+    if "file_frames" in d:
+        _check_frames(d, len(coords), ne, asg, problems)
+    return problems
+
+
+def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
+    """Read a FOLD file written by :func:`write_fold`: (pattern, omega, metadata).
+
+    ``metadata`` holds the ``rffqm:`` keys of the file other than omega, pattern and
+    version, without the prefix. Raises :class:`InputError` for a file that is not valid
+    JSON, not a FOLD file, or not written by this package.
+    """
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: cannot read a FOLD (JSON) file: {exc}") from None
+    problems = validate_fold(d)
+    if problems:
+        raise InputError(f"{path} is not a valid FOLD file: " + "; ".join(problems))
+    if d.get("file_creator") != CREATOR or PREFIX + "pattern" not in d:
+        raise InputError(f"{path} is a FOLD file but not one written by {CREATOR} "
+                         f"(file_creator {d.get('file_creator')!r}, no 'rffqm:pattern'); "
+                         "only files from write_fold carry the design data")
+    try:
+        pat = Pattern.from_dict(d[PREFIX + "pattern"])
+        omega = float(check_omega(d[PREFIX + "omega"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: broken rffqm design data: {exc!r}") from None
+    xy = np.asarray(d["vertices_coords"], dtype=float)
+    if xy.shape != ((pat.N + 1) * (pat.M + 1), 2) or not np.allclose(
+            xy, pat.X[..., :2].reshape(-1, 2), rtol=0, atol=1e-9):
+        raise InputError(f"{path}: vertices_coords do not match 'rffqm:pattern'; the file "
+                         "was edited after it was written")
+    meta = {k[len(PREFIX):]: v for k, v in d.items()
+            if k.startswith(PREFIX) and k[len(PREFIX):] not in _RESERVED}
+    return pat, omega, meta
+
+
+# --------------------------------------------------------------------------- 2-D drawings
+def draw_creases(ax, pat: Pattern, omega: float, linewidth: float = 1.0) -> list:
+    """Draw every edge of the flat pattern on a matplotlib ``ax``: one Line2D per edge,
+    mountain red, valley blue, boundary black; equal aspect, no axes. Returns the lines."""
+    lines = []
+    for p0, p1, kind in crease_segments(pat, omega):
+        (line,) = ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color=COLORS[kind],
+                          linewidth=linewidth, solid_capstyle="round", clip_on=False)
+        lines.append(line)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    return lines
+
+
+def _crease_figure(pat: Pattern, omega: float, width_in: float = 8.0):
+    """A bare figure (no background, no axes) of the pattern, sized to its aspect ratio."""
+    from matplotlib.figure import Figure
+
+    xy = pat.X[..., :2].reshape(-1, 2)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    span = hi - lo
+    pad = 0.02 * span.max()
+    size = span + 2 * pad
+    fig = Figure(figsize=(width_in, width_in * size[1] / size[0]))
+    fig.patch.set_visible(False)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.patch.set_visible(False)
+    draw_creases(ax, pat, omega)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    return fig
+
+
+def write_svg(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
+    """Crease pattern as SVG: one ``<path>`` per edge, stroke #ff0000 mountain, #0000ff
+    valley, #000000 boundary (Origami Simulator's import colours). Deterministic output."""
+    import matplotlib
+
+    fig = _crease_figure(pat, omega)
+    with matplotlib.rc_context({"svg.hashsalt": CREATOR, "svg.fonttype": "none"}), \
+            atomic_path(path) as tmp:
+        fig.savefig(tmp, format="svg", metadata={"Date": None})
+    return Path(path)
+
+
+def write_pdf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
+    """Crease pattern as PDF, styled as :func:`write_svg`."""
+    fig = _crease_figure(pat, omega)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="pdf", metadata={"CreationDate": None})
+    return Path(path)
+
+
+def write_dxf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
+    """Crease pattern as DXF (R2010, unitless): one LINE per edge on the layer MOUNTAIN (red),
+    VALLEY (blue) or BOUNDARY (white/black), for laser cutters and CAD."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010", units=0)
+    for layer, color in DXF_LAYERS.values():
+        doc.layers.add(layer, color=color)
+    msp = doc.modelspace()
+    for p0, p1, kind in crease_segments(pat, omega):
+        msp.add_line(tuple(p0), tuple(p1), dxfattribs={"layer": DXF_LAYERS[kind][0]})
+    with atomic_path(path) as tmp:
+        doc.saveas(tmp)
+    return Path(path)
+
+
+# --------------------------------------------------------------------------- meshes
+def triangles(N: int, M: int) -> np.ndarray:
+    """Every panel split along its diagonal a-d into (a, c, d) and (a, d, b), (2NM, 3);
+    counter-clockwise in the flat pattern, so normals point to its +e3 side."""
+    q = faces_vertices(N, M)  # a, c, d, b
+    return np.stack([q[:, [0, 1, 2]], q[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+
+
+def folded_mesh(pat: Pattern, omega: float):
+    """The folded state at ``omega`` as a ``trimesh.Trimesh`` ((N+1)(M+1) vertices, 2NM
+    triangles, vertex order of the FOLD file)."""
+    import trimesh
+
+    Y = fold(pat, float(check_omega(omega)))
+    return trimesh.Trimesh(vertices=Y.reshape(-1, 3), faces=triangles(pat.N, pat.M),
+                           process=False)
+
+
+def write_mesh(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
+    """Write the folded mesh as .obj, .ply (binary) or .glb (binary glTF) by the suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in MESH_FORMATS:
+        raise InputError(f"mesh format {suffix!r} not supported; use one of "
+                         f"{sorted(MESH_FORMATS)}")
+    mesh = folded_mesh(pat, omega)
+    with atomic_path(path) as tmp:
+        mesh.export(tmp, file_type=MESH_FORMATS[suffix])
+    return Path(path)

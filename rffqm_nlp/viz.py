@@ -1,0 +1,232 @@
+"""Pictures: matplotlib crease-pattern and convergence plots, pyvista renders and folding GIFs.
+
+matplotlib is always available. The 3-D renders need the optional extra ``viz`` (pyvista,
+imageio) and an off-screen OpenGL context: EGL or OSMesa (Debian: ``libegl1 libegl-mesa0
+libgl1-mesa-dri``); :func:`rendering_available` says whether rendering works here.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io import COLORS, atomic_path, draw_creases, faces_vertices
+from .marching import check_omega, fold
+from .pattern import Pattern
+
+_KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
+_HISTORY_KEYS = ("iter", "objective", "inf_pr")
+#: A tiny off-screen render, run in a child process so a missing GL library cannot crash us.
+_PROBE = """
+import pyvista as pv
+pv.OFF_SCREEN = True
+p = pv.Plotter(off_screen=True, window_size=(32, 24))
+p.add_mesh(pv.Sphere())
+img = p.screenshot(return_img=True)
+p.close()
+assert img.shape == (24, 32, 3) and img.std() > 0, "blank image"
+"""
+
+
+# --------------------------------------------------------------------------- matplotlib
+def plot_crease_pattern(pat: Pattern, omega: float, ax=None, legend: bool = True):
+    """Draw the flat crease pattern (mountain red, valley blue, boundary black) on ``ax``
+    (a new figure when None); the assignments are those at ``omega``. Returns the Axes."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(6, 6))
+    lines = draw_creases(ax, pat, omega)
+    if legend:
+        from matplotlib.lines import Line2D
+
+        present = {ln.get_color() for ln in lines}
+        handles = [Line2D([], [], color=c, label=_KIND_NAMES[k])
+                   for k, c in COLORS.items() if c in present]
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
+    return ax
+
+
+def _check_history(history: Mapping[str, Sequence[float]]) -> dict[str, np.ndarray]:
+    missing = [k for k in _HISTORY_KEYS if k not in history]
+    if missing:
+        raise InputError(f"history is missing the keys {missing}; it needs {list(_HISTORY_KEYS)}")
+    out = {k: np.asarray(history[k], dtype=float).ravel() for k in _HISTORY_KEYS}
+    sizes = {k: v.size for k, v in out.items()}
+    if len(set(sizes.values())) != 1:
+        raise InputError(f"history lists must have equal lengths, got {sizes}")
+    return out
+
+
+def plot_convergence(history: Mapping[str, Sequence[float]], path: str | os.PathLike) -> Path:
+    """Objective and constraint violation (``inf_pr``) per iteration, log scale, to ``path``
+    (format from the suffix: .png, .svg, .pdf). ``history`` maps "iter", "objective" and
+    "inf_pr" to lists of equal length. Non-positive values are left out of the log plot."""
+    from matplotlib.figure import Figure
+
+    h = _check_history(history)
+    fig = Figure(figsize=(6, 5), layout="constrained")
+    ax_obj, ax_inf = fig.subplots(2, 1, sharex=True)
+    for ax, key, label, color in ((ax_obj, "objective", "objective", "tab:blue"),
+                                  (ax_inf, "inf_pr", "constraint violation", "tab:red")):
+        keep = h[key] > 0
+        ax.semilogy(h["iter"][keep], h[key][keep], ".-", color=color)
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_inf.set_xlabel("iteration")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, metadata=_no_date(Path(path).suffix))
+    return Path(path)
+
+
+def _no_date(suffix: str) -> dict | None:
+    """savefig metadata that keeps vector output free of timestamps."""
+    return {".svg": {"Date": None}, ".pdf": {"CreationDate": None}}.get(suffix.lower())
+
+
+# --------------------------------------------------------------------------- pyvista
+def _pyvista():
+    """Import pyvista for off-screen use, or raise an ImportError naming the extra."""
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        # No display: go straight to EGL (VTK falls back to OSMesa) instead of trying X.
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    try:
+        import imageio.v3  # noqa: F401  (checked here so the message names the extra)
+        import pyvista as pv
+    except ImportError as exc:
+        raise ImportError("3-D rendering needs pyvista and imageio: install the 'viz' extra, "
+                          f"pip install 'rffqm_nlp[viz]' ({exc})") from exc
+    pv.OFF_SCREEN = True
+    return pv
+
+
+@lru_cache(maxsize=1)
+def rendering_available() -> tuple[bool, str]:
+    """(True, "") when off-screen pyvista rendering works, else (False, reason).
+
+    Tries one tiny render in a child process (once per session): a missing EGL/OSMesa
+    library can abort the process instead of raising.
+    """
+    try:
+        _pyvista()
+    except ImportError as exc:
+        return False, str(exc)
+    try:
+        run = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
+                             timeout=120)
+    except subprocess.TimeoutExpired:
+        return False, "off-screen rendering probe timed out"
+    if run.returncode != 0:
+        tail = (run.stderr.strip().splitlines() or ["no message"])[-1]
+        return False, (f"off-screen rendering failed (exit {run.returncode}: {tail}); "
+                       "install EGL or OSMesa (Debian: libegl1 libegl-mesa0 libgl1-mesa-dri)")
+    return True, ""
+
+
+def _polydata(pv, Y: np.ndarray, N: int, M: int):
+    """The folded vertices (N+1, M+1, 3) as a PolyData of quads a, c, d, b."""
+    quads = faces_vertices(N, M)
+    cells = np.hstack([np.full((len(quads), 1), 4), quads]).ravel()
+    return pv.PolyData(Y.reshape(-1, 3), cells)
+
+
+def _add_target(pv, p, mesh, target) -> np.ndarray:
+    """Draw ``target`` translucent on ``p``; return every mesh vertex's distance to it."""
+    if hasattr(target, "vertices") and hasattr(target, "faces"):
+        surf = pv.wrap(target)
+        p.add_mesh(surf, color="lightgray", opacity=0.35)
+        return np.abs(mesh.compute_implicit_distance(surf)["implicit_distance"])
+    pts = np.asarray(target, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+        raise InputError(f"target must be a trimesh.Trimesh or (n, 3) points, got shape "
+                         f"{pts.shape}")
+    from scipy.spatial import cKDTree
+
+    p.add_points(pts, color="gray", opacity=0.5, point_size=4)
+    return cKDTree(pts).query(mesh.points)[0]
+
+
+def _plotter(pv, size: tuple[int, int]):
+    p = pv.Plotter(off_screen=True, window_size=(int(size[0]), int(size[1])))
+    p.set_background("white")
+    return p
+
+
+def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
+               size: tuple[int, int] = (800, 600)) -> Path:
+    """Render the folded state at ``omega`` to a PNG of ``size`` (width, height) pixels.
+
+    With a ``target`` (a trimesh.Trimesh or (n, 3) points in the frame of
+    :func:`marching.fold`) the origami is coloured by its distance to the target, which is
+    drawn translucent; otherwise by height z.
+    """
+    pv = _pyvista()
+    import imageio.v3 as iio
+
+    mesh = _polydata(pv, fold(pat, float(check_omega(omega))), pat.N, pat.M)
+    p = _plotter(pv, size)
+    try:
+        if target is None:
+            title = "z"
+            mesh[title] = mesh.points[:, 2]
+        else:
+            title = "distance to target"
+            mesh[title] = _add_target(pv, p, mesh, target)
+        p.add_mesh(mesh, scalars=title, cmap="viridis", show_edges=True, edge_color="black",
+                   scalar_bar_args={"title": title, "color": "black"})
+        p.view_isometric()
+        p.reset_camera()
+        img = p.screenshot(return_img=True)
+    finally:
+        p.close()
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, img, extension=".png")
+    return Path(path)
+
+
+def folding_gif(path: str | os.PathLike, pat: Pattern, omega_end: float, frames: int = 24,
+                size: tuple[int, int] = (480, 360), duration_ms: int = 80) -> Path:
+    """A looping GIF of the folding motion from flat (omega = 0) to ``omega_end``, in
+    ``frames`` states, coloured by height z with one colour scale for the whole motion."""
+    if int(frames) != frames or frames < 2:
+        raise InputError(f"frames must be an integer >= 2, got {frames!r}")
+    pv = _pyvista()
+    import imageio.v3 as iio
+
+    omegas = np.linspace(0.0, float(check_omega(omega_end)), int(frames))
+    Ys = fold(pat, omegas)
+    mesh = _polydata(pv, Ys[0], pat.N, pat.M)
+    mesh["z"] = Ys[0][..., 2].ravel()
+    z_lo, z_hi = float(Ys[..., 2].min()), float(Ys[..., 2].max())
+    zlim = (z_lo, max(z_hi, z_lo + 1e-9))
+    p = _plotter(pv, size)
+    images = []
+    try:
+        p.add_mesh(mesh, scalars="z", clim=zlim, cmap="viridis", show_edges=True,
+                   edge_color="black", show_scalar_bar=False)
+        p.view_isometric()
+        p.reset_camera(bounds=_union_bounds(Ys))
+        for Y in Ys:
+            mesh.points = Y.reshape(-1, 3)
+            mesh["z"] = Y[..., 2].ravel()
+            p.render()
+            images.append(p.screenshot(return_img=True))
+    finally:
+        p.close()
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, np.stack(images), extension=".gif", duration=duration_ms, loop=0)
+    return Path(path)
+
+
+def _union_bounds(Ys: np.ndarray) -> tuple[float, ...]:
+    """(xmin, xmax, ymin, ymax, zmin, zmax) over every state, so the camera never moves."""
+    pts = Ys.reshape(-1, 3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return tuple(float(v) for pair in zip(lo, hi) for v in pair)
