@@ -1,0 +1,433 @@
+"""Inverse design (the paper's section "Discussion on the inverse problem", PAPER_NOTES s.8).
+
+:class:`DesignProblem` states the problem declaratively: a target surface, a 2N x 2M
+pattern whose coarse lattice r(i, j) = y^{(2i)(2j)} should match the target lattice, the
+Miura mountain-valley assignment held fixed, the inline manufacturability constraints and the
+loss. :meth:`DesignProblem.solve` transcribes it (:mod:`rffqm_nlp.transcription`), solves one
+IPOPT NLP with exact derivatives, re-marches the answer with the independent NumPy model and
+returns a :class:`~rffqm_nlp.results.DesignResult`.
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import casadi as ca
+import numpy as np
+
+from . import numpy_model, shape, surfaces, transcription
+from .boundary import LAYOUTS, BoundaryData, miura_boundary
+from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed
+from .marching import pattern_function
+from .results import DesignResult
+
+PI = np.pi
+DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1}
+TRANSCRIPTIONS = ("sequential",)
+HESSIANS = ("gauss-newton", "exact", "limited-memory")
+GROUPS = ("angles", "lengths", "omega")
+_INFEASIBLE = ("Infeasible_Problem_Detected",)
+
+
+@dataclass(frozen=True)
+class Start:
+    """The Miura start and the target lattice placed to match it."""
+
+    boundary: BoundaryData
+    omega: float
+    target_points: np.ndarray
+    spacing: float
+    rotation: np.ndarray
+    translation: np.ndarray
+
+
+@dataclass(frozen=True)
+class DesignProblem:
+    """Which RFFQM pattern, perturbed from a Miura-ori, folds into ``target``?
+
+    Parameters (all with defaults chosen so designs are manufacturable):
+
+    * ``panels``: (2N, 2M) panels, both even; the coarse lattice is (N+1) x (M+1);
+    * ``layout``, ``alpha0``, ``omega0``: the starting Miura-ori (PAPER_NOTES s.6); its side
+      lengths are chosen so that its coarse lattice at ``omega0`` has the target lattice's
+      mean spacings;
+    * ``min_angle``: every sector angle in [min_angle, pi - min_angle] (this also keeps the
+      first check, eq:firstCheck, away from its limits);
+    * ``mu_margin``: |mu_abc| of every panel stays on its starting side of 1 by this margin
+      (second check, eq:secondCheck, with the MV pattern held);
+    * ``min_length``: every side >= min_length times the mean side (replaces the LP);
+    * ``omega_bounds``: bounds of the fold parameter;
+    * ``fix``: groups held at their start, among "angles", "lengths", "omega";
+    * ``weights``: loss weights, "forms" (the paper's fundamental-form loss) and "position"
+      (lattice positions after a rigid alignment that is part of the NLP); see
+      :func:`rffqm_nlp.transcription.loss_residuals`;
+    * ``continuation``: multipliers of the regularization weight for successive solves, each
+      warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
+      fit improve; the default is one solve);
+    * ``transcription``: "sequential"; ``hessian``: "gauss-newton" (J^T J of the residuals),
+      "exact" or "limited-memory" (L-BFGS);
+    * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits.
+    """
+
+    target: surfaces.Surface
+    panels: tuple[int, int] = (20, 20)
+    layout: str = "zigzag_j"
+    alpha0: float = 1.1
+    omega0: float = 2.0
+    min_angle: float = 0.15
+    mu_margin: float = 0.02
+    min_length: float = 0.2
+    omega_bounds: tuple[float, float] = (0.05, PI - 0.05)
+    fix: tuple[str, ...] = ()
+    weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
+    continuation: tuple[float, ...] = (1.0,)
+    transcription: str = "sequential"
+    hessian: str = "exact"
+    max_iter: int = 1000
+    tol: float = 1e-6
+    time_limit: float | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.target, surfaces.Surface):
+            raise InputError("target must be a surface from rq.surfaces (get, Custom, load), "
+                             f"got {type(self.target).__name__}")
+        panels = tuple(int(p) for p in self.panels)
+        if len(panels) != 2 or any(p < 4 or p % 2 for p in panels):
+            raise InputError(f"panels must be two even numbers >= 4 (2N, 2M), got {self.panels}")
+        object.__setattr__(self, "panels", panels)
+        object.__setattr__(self, "fix", tuple(self.fix))
+        object.__setattr__(self, "continuation", tuple(float(c) for c in self.continuation))
+        if not self.continuation or any(not c > 0 for c in self.continuation):
+            raise InputError(f"continuation needs positive multipliers, got {self.continuation}")
+        object.__setattr__(self, "omega_bounds", tuple(float(w) for w in self.omega_bounds))
+        object.__setattr__(self, "weights", {k: float(v) for k, v in self.weights.items()})
+        _choice("layout", self.layout, LAYOUTS)
+        _choice("transcription", self.transcription, TRANSCRIPTIONS)
+        _choice("hessian", self.hessian, HESSIANS)
+        for name in self.fix:
+            _choice("fix", name, GROUPS)
+        unknown = set(self.weights) - set(DEFAULT_WEIGHTS)
+        if unknown or any(w < 0 for w in self.weights.values()) or not any(self.weights.values()):
+            raise InputError(f"weights take non-negative values for {sorted(DEFAULT_WEIGHTS)}, "
+                             f"not all zero; got {self.weights}")
+        if not 0 < self.alpha0 < PI / 2:
+            raise InputError(f"alpha0 must be an acute angle in (0, pi/2), got {self.alpha0}")
+        if not 0 <= self.min_angle < PI / 4:
+            raise InputError(f"min_angle must lie in [0, pi/4), got {self.min_angle}")
+        if not 0 <= self.mu_margin < 1:
+            raise InputError(f"mu_margin must lie in [0, 1), got {self.mu_margin}")
+        if not 0 <= self.min_length:
+            raise InputError(f"min_length must be >= 0, got {self.min_length}")
+        lo, hi = self.omega_bounds
+        if not -PI <= lo < hi <= PI or not lo <= self.omega0 <= hi:
+            raise InputError(f"need -pi <= omega_bounds[0] <= omega0 <= omega_bounds[1] <= pi, "
+                             f"got omega0 = {self.omega0}, omega_bounds = {self.omega_bounds}")
+        if self.max_iter < 1 or not self.tol > 0:
+            raise InputError("max_iter must be >= 1 and tol > 0")
+
+    @property
+    def N(self) -> int:
+        """Coarse lattice rows (the pattern has 2N panel rows)."""
+        return self.panels[0] // 2
+
+    @property
+    def M(self) -> int:
+        """Coarse lattice columns (the pattern has 2M panel columns)."""
+        return self.panels[1] // 2
+
+    # ------------------------------------------------------------------ start
+    def start(self) -> Start:
+        """The starting Miura and the target lattice.
+
+        The target lattice spans the target's whole domain; the Miura's vertical and
+        horizontal sides are scaled so that its coarse lattice at omega0 has the same mean
+        neighbour distances along i and along j; both are then aligned (Kabsch).
+        """
+        N, M = self.N, self.M
+        unit = miura_boundary(2 * N, 2 * M, 1.0, 1.0, self.alpha0, self.layout)
+        coarse = numpy_model.fold(numpy_model.march(unit), self.omega0)[::2, ::2]
+        target_points = self.target.lattice(N, M)
+        s_i, s_j = surfaces.mean_neighbour_distances(coarse)
+        t_i, t_j = surfaces.mean_neighbour_distances(target_points)
+        bd = unit.with_lengths(np.concatenate([unit.l_left * t_i / s_i,
+                                               unit.l_bottom * t_j / s_j]))
+        coarse = numpy_model.fold(numpy_model.march(bd), self.omega0)[::2, ::2]
+        R, t, _ = shape.kabsch(coarse, target_points)
+        return Start(boundary=bd, omega=self.omega0, target_points=target_points,
+                     spacing=0.5 * (t_i + t_j), rotation=R, translation=t)
+
+    # ------------------------------------------------------------------ constraints
+    def _constraints(self, start: Start):
+        """The inline constraints g(pattern inputs) with their bounds."""
+        pattern = pattern_function(2 * self.N, 2 * self.M)
+        mu0 = pattern.call([ca.DM(a) for a in _pattern_inputs(start.boundary)])[5].full()
+        outside = np.abs(mu0.ravel(order="F")) > 1
+        m = self.mu_margin
+        lo_angle, hi_angle = self.min_angle, PI - self.min_angle
+
+        def constraints(inputs):
+            alpha, beta, _, lh, lv, mu = pattern.call(inputs)[:6]
+            sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
+            mean = ca.sum1(sides) / sides.numel()
+            angles = ca.vertcat(ca.vec(alpha), ca.vec(beta))
+            mu_side = ca.DM(np.where(outside, 1.0, -1.0)) * (ca.vec(mu) ** 2 - 1)
+            g = ca.vertcat(angles, mu_side, sides / mean - self.min_length)
+            na, nm, ns = angles.numel(), mu_side.numel(), sides.numel()
+            lbg = np.concatenate([np.full(na, lo_angle),
+                                  np.where(outside, (1 + m) ** 2 - 1, 1 - (1 - m) ** 2),
+                                  np.zeros(ns)])
+            ubg = np.concatenate([np.full(na, hi_angle), np.full(nm + ns, np.inf)])
+            return g, lbg, ubg
+
+        return constraints
+
+    def transcribe(self, start: Start | None = None,
+                   weights: dict[str, float] | None = None) -> transcription.NLP:
+        """The NLP of this problem in the chosen transcription (``weights`` override)."""
+        start = start or self.start()
+        return transcription.sequential(
+            start.boundary, start.omega, (start.rotation, start.translation),
+            start.target_points, weights or self.weights, start.spacing,
+            (self.min_angle, PI - self.min_angle), self.omega_bounds, self.fix,
+            self._constraints(start))
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, callback: Callable[[dict], None] | None = None,
+              warm_start: DesignResult | None = None, verbose: bool = False) -> DesignResult:
+        """Solve the design with IPOPT; see the module docstring.
+
+        ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration.
+        Raises :class:`InfeasibleDesign` when IPOPT finds the constraints infeasible,
+        :class:`SolverFailed` (with IPOPT's status and the last iterate) otherwise.
+        """
+        if self.min_length >= 1:
+            raise InfeasibleDesign(
+                f"min_length = {self.min_length} asks every side to be at least the mean side, "
+                "which only equal sides satisfy; choose min_length < 1 (default 0.2)")
+        t0 = time.perf_counter()
+        start = self.start()
+        x = None if warm_start is None else np.asarray(warm_start.x, dtype=float)
+        history: dict[str, list] = {"iter": [], "objective": [], "inf_pr": [], "elapsed": []}
+        iterations, t_build = 0, 0.0
+        for factor in self.continuation:
+            weights = dict(self.weights, regularization=factor * self.weights["regularization"])
+            t1 = time.perf_counter()
+            nlp = self.transcribe(start, weights)
+            if x is None:
+                x = nlp.x0
+            elif x.shape != nlp.x0.shape:
+                raise InputError("warm_start comes from a problem of another size")
+            solver = self._solver(nlp, history, callback, verbose)
+            t_build += time.perf_counter() - t1
+            sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+            stats = solver.stats()
+            x = sol["x"].full().ravel()
+            iterations += int(stats["iter_count"])
+            solve_stats = {"status": stats["return_status"], "success": bool(stats["success"]),
+                           "iterations": iterations, "build_time": t_build,
+                           "solve_time": time.perf_counter() - t0 - t_build,
+                           "objective": float(sol["f"]), "history": history,
+                           "transcription": self.transcription, "hessian": self.hessian}
+            if not stats["success"]:
+                break
+        if not stats["success"]:
+            if stats["return_status"] in _INFEASIBLE:
+                raise InfeasibleDesign(
+                    f"IPOPT status {stats['return_status']}: the constraints cannot all hold "
+                    f"({_violation_report(nlp, sol)}); relax min_length, min_angle or "
+                    "mu_margin")
+            raise SolverFailed(
+                f"IPOPT did not converge: status {stats['return_status']} after "
+                f"{iterations} iterations; raise max_iter or time_limit, or relax tol",
+                status=stats["return_status"], stats=solve_stats, last_iterate=x)
+        return self._result(nlp, start, x, solve_stats)
+
+    def _solver(self, nlp: transcription.NLP, history: dict, callback, verbose: bool):
+        f = 0.5 * ca.sumsqr(nlp.residuals)
+        opts: dict[str, Any] = {
+            "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
+            "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
+            "print_time": verbose, "ipopt.sb": "yes"}
+        if self.time_limit is not None:
+            opts["ipopt.max_wall_time"] = float(self.time_limit)
+        if self.hessian == "limited-memory":
+            opts["ipopt.hessian_approximation"] = "limited-memory"
+        elif self.hessian == "gauss-newton":
+            J = ca.jacobian(nlp.residuals, nlp.x)
+            lam_f = ca.MX.sym("lam_f")
+            lam_g = ca.MX.sym("lam_g", nlp.g.numel())
+            p = ca.MX.sym("p", 0)
+            opts["hess_lag"] = ca.Function(
+                "nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
+                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        log = _IterationLog(nlp, history, callback)
+        opts["iteration_callback"] = log
+        solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
+        solver._iteration_log = log  # keep the callback alive as long as the solver
+        return solver
+
+    def _result(self, nlp: transcription.NLP, start: Start, x: np.ndarray,
+                stats: dict) -> DesignResult:
+        """Re-march the solution with the NumPy model, check it, measure the fit."""
+        vec, omega, _, _ = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
+        omega = float(omega[0])
+        bd = BoundaryData.from_vector(vec, start.boundary.sigma, 2 * self.N, 2 * self.M)
+        try:
+            pattern = numpy_model.march(bd)
+        except MarchingError as exc:
+            raise SolverFailed(f"the solution fails re-marching with the NumPy model: {exc}",
+                               status="remarch_failed", stats=stats, last_iterate=x) from exc
+        Y = numpy_model.fold(pattern, omega)
+        Y_graph = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
+        scale = np.abs(Y).max()
+        if np.abs(Y - Y_graph).max() > 1e-8 * scale:
+            raise SolverFailed("the NumPy re-march disagrees with the CasADi graph by "
+                               f"{np.abs(Y - Y_graph).max():.3g}", status="remarch_mismatch",
+                               stats=stats, last_iterate=x)
+        self._check_constraints(pattern, stats, x)
+        R, t, rms = shape.kabsch(Y[::2, ::2], start.target_points)
+        folded = Y @ R.T + t
+        fit = design_fit(folded[::2, ::2], start.target_points, self.target)
+        fit.update(min_side_over_mean=float(pattern.side_lengths.min()
+                                            / pattern.side_lengths.mean()),
+                   min_sector_angle=float(pattern.sector_angles.min()))
+        return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
+                            target_points=start.target_points, rotation=R, translation=t,
+                            fit=fit, stats=stats, problem=self.to_config(), x=x)
+
+    def _check_constraints(self, pattern, stats: dict, x: np.ndarray) -> None:
+        tol = 1e-6
+        sides = pattern.side_lengths
+        worst_angle = float(np.min(np.concatenate([pattern.alpha.ravel(), pattern.beta.ravel(),
+                                                   PI - pattern.alpha.ravel(),
+                                                   PI - pattern.beta.ravel()])))
+        problems = []
+        if worst_angle < self.min_angle - tol:
+            problems.append(f"a sector angle of {worst_angle:.6g} < min_angle")
+        if sides.min() < self.min_length * sides.mean() * (1 - tol):
+            problems.append(f"a side of {sides.min() / sides.mean():.6g} x mean < min_length")
+        if problems:
+            raise SolverFailed("the solution violates its constraints on re-marching: "
+                               + "; ".join(problems), status="constraint_violation",
+                               stats=stats, last_iterate=x)
+
+    # ------------------------------------------------------------------ configuration
+    def to_config(self) -> dict[str, Any]:
+        """The problem as a TOML-ready dict: {"target": ..., "design": ...}."""
+        design = {name: getattr(self, name) for name in self.__dataclass_fields__
+                  if name != "target"}
+        design["weights"] = dict(self.weights)
+        design["panels"] = list(self.panels)
+        design["omega_bounds"] = list(self.omega_bounds)
+        design["fix"] = list(self.fix)
+        design["continuation"] = list(self.continuation)
+        if design["time_limit"] is None:
+            design.pop("time_limit")
+        return {"target": self.target.to_config(), "design": design}
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any]) -> "DesignProblem":
+        """A problem from {"target": {...}, "design": {...}} (the tables of a target file)."""
+        if "target" not in config:
+            raise InputError("a design needs a [target] table")
+        design = dict(config.get("design", {}))
+        known = set(cls.__dataclass_fields__) - {"target"}
+        unknown = set(design) - known
+        if unknown:
+            raise InputError(f"unknown [design] keys {sorted(unknown)}; known: {sorted(known)}")
+        return cls(target=surfaces.from_config(config["target"]), **design)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "DesignProblem":
+        """A problem from a TOML file with [target] and [design] tables."""
+        try:
+            with open(path, "rb") as fh:
+                config = tomllib.load(fh)
+        except FileNotFoundError:
+            raise InputError(f"no such design file: {path}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{path} is not valid TOML: {exc}") from None
+        return cls.from_config(config)
+
+
+def design_fit(coarse: np.ndarray, target_points: np.ndarray,
+               target: surfaces.Surface) -> dict[str, float]:
+    """Fit measures of an aligned coarse lattice, relative to the target's diameter.
+
+    ``rms``: RMS distance to the target lattice (corresponding points); ``rms_surface`` and
+    ``hausdorff``: RMS and largest distance to the target surface; ``plane_rms``: RMS
+    distance of the target lattice to its best-fitting plane, the fit a flat sheet reaches.
+    """
+    diameter = target.diameter()
+    rms = float(np.sqrt(np.mean(np.sum((coarse - target_points) ** 2, axis=-1))))
+    pts = target_points.reshape(-1, 3)
+    plane = np.linalg.svd(pts - pts.mean(0), compute_uv=False)[-1] / np.sqrt(len(pts))
+    surface = shape.relative_fit(coarse, target)
+    return {"rms": rms / diameter, "rms_surface": surface["rms"],
+            "hausdorff": surface["hausdorff"], "plane_rms": float(plane / diameter)}
+
+
+def _pattern_inputs(bd: BoundaryData) -> list[np.ndarray]:
+    return [bd.left.T, bd.bottom.T, bd.l_left[None, :], bd.l_bottom[None, :]]
+
+
+def _choice(name: str, value: str, options: tuple[str, ...]) -> None:
+    if value not in options:
+        raise InputError(f"{name} must be one of {options}, got {value!r}")
+
+
+def _violation_report(nlp: transcription.NLP, sol) -> str:
+    g = sol["g"].full().ravel()
+    viol = np.maximum(nlp.lbg - g, g - nlp.ubg)
+    return f"largest constraint violation {viol.max():.3g} at constraint {int(viol.argmax())}"
+
+
+class _IterationLog(ca.Callback):
+    """IPOPT iteration callback: records objective and constraint violation per iteration."""
+
+    def __init__(self, nlp: transcription.NLP, history: dict, callback):
+        ca.Callback.__init__(self)
+        self._nx, self._ng = nlp.x.numel(), nlp.g.numel()
+        self._lbg, self._ubg = nlp.lbg, nlp.ubg
+        self._history = history
+        self._callback = callback
+        self._t0 = time.perf_counter()
+        self.construct("iteration_log", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = ca.nlpsol_out(i)
+        if n in ("f",):
+            return ca.Sparsity.dense(1)
+        if n in ("x", "lam_x"):
+            return ca.Sparsity.dense(self._nx)
+        if n in ("g", "lam_g"):
+            return ca.Sparsity.dense(self._ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        g = np.asarray(arg[ca.nlpsol_out().index("g")]).ravel()
+        viol = float(np.max(np.concatenate([[0.0], self._lbg - g, g - self._ubg])))
+        entry = {"iter": len(self._history["iter"]),
+                 "objective": float(arg[ca.nlpsol_out().index("f")]),
+                 "inf_pr": viol, "elapsed": time.perf_counter() - self._t0}
+        for key, value in entry.items():
+            self._history[key].append(value)
+        if self._callback is not None:
+            self._callback(entry)
+        return [0]

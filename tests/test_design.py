@@ -1,0 +1,122 @@
+"""Inverse design: the sequential IPOPT transcription, its checks, errors and result files."""
+
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import rffqm_nlp as rq
+from rffqm_nlp import numpy_model, surfaces
+from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.results import DesignResult
+
+TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
+
+
+def small(name: str, **kw) -> DesignProblem:
+    return replace(DesignProblem.load(f"targets/{name}.toml"), **{"panels": (8, 8), **kw})
+
+
+@pytest.fixture(scope="module", params=TARGETS)
+def solved(request):
+    prob = small(request.param)
+    return prob, prob.solve()
+
+
+def test_small_designs_converge_with_constraints_and_fit(solved):
+    prob, res = solved
+    assert res.stats["success"] and res.stats["status"] == "Solve_Succeeded"
+    # Inline constraints hold on the independent NumPy re-march.
+    pat = numpy_model.march(res.boundary)
+    angles = np.concatenate([pat.alpha.ravel(), pat.beta.ravel()])
+    assert angles.min() >= prob.min_angle - 1e-6 and angles.max() <= np.pi - prob.min_angle + 1e-6
+    sides = pat.side_lengths
+    assert sides.min() >= prob.min_length * sides.mean() * (1 - 1e-6)
+    start_mu = numpy_model.march(prob.start().boundary).mu
+    assert np.all((np.abs(pat.mu) > 1) == (np.abs(start_mu) > 1))
+    assert np.all(np.abs(np.abs(pat.mu) - 1) >= prob.mu_margin - 1e-6)
+    # Same folded lattice from both models; the result's fields are consistent.
+    Y = numpy_model.fold(pat, res.omega) @ res.rotation.T + res.translation
+    np.testing.assert_allclose(Y, res.folded, atol=1e-8 * np.abs(Y).max())
+    assert res.folded.shape == (9, 9, 3) and res.target_points.shape == (5, 5, 3)
+    # Much better than the flat start and than the best plane.
+    assert res.fit["rms"] < 0.25 * res.fit["plane_rms"]
+    assert res.fit["rms"] < 0.02
+    assert res.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
+    assert res.fit["min_sector_angle"] >= prob.min_angle - 1e-6
+
+
+def test_result_save_load_round_trip(solved, tmp_path):
+    _, res = solved
+    res.save(tmp_path / "run")
+    back = DesignResult.load(tmp_path / "run")
+    assert back.omega == res.omega and back.fit == res.fit
+    np.testing.assert_array_equal(back.folded, res.folded)
+    np.testing.assert_array_equal(back.boundary.to_vector(), res.boundary.to_vector())
+    np.testing.assert_array_equal(back.pattern.X, res.pattern.X)
+    assert back.stats["iterations"] == res.stats["iterations"]
+    assert DesignProblem.from_config(back.problem).to_config() == res.problem
+
+
+def test_start_matches_target_spacing():
+    prob = small("sphere_cap")
+    st = prob.start()
+    coarse = numpy_model.fold(numpy_model.march(st.boundary), st.omega)[::2, ::2]
+    mine = surfaces.mean_neighbour_distances(coarse)
+    theirs = surfaces.mean_neighbour_distances(st.target_points)
+    np.testing.assert_allclose(mine, theirs, rtol=1e-12)
+
+
+def test_nlp_derivatives_match_finite_differences():
+    prob = small("hyperboloid")
+    nlp = prob.transcribe()
+    f = 0.5 * ca.sumsqr(nlp.residuals)
+    F = ca.Function("F", [nlp.x], [f, ca.gradient(f, nlp.x), nlp.g, ca.jacobian(nlp.g, nlp.x)])
+    rng = np.random.default_rng(1)
+    x0 = nlp.x0 + 1e-3 * rng.normal(size=nlp.x0.size)
+    _, grad, _, jac = (np.array(v.full()) for v in F(x0))
+    h = 1e-6
+    for _ in range(3):
+        d = rng.normal(size=x0.size)
+        fp, _, gp, _ = F(x0 + h * d)
+        fm, _, gm, _ = F(x0 - h * d)
+        assert float((fp - fm) / (2 * h)) == pytest.approx(float(grad.ravel() @ d), rel=1e-6)
+        fd = ((gp - gm).full().ravel()) / (2 * h)
+        np.testing.assert_allclose(fd, jac @ d, rtol=1e-6, atol=1e-6 * np.abs(jac @ d).max())
+
+
+def test_forced_failure_raises_solver_failed_with_status():
+    with pytest.raises(rq.SolverFailed, match="Maximum_Iterations_Exceeded") as exc:
+        small("sphere_cap", max_iter=1, tol=1e-12).solve()
+    assert exc.value.status == "Maximum_Iterations_Exceeded"
+    assert exc.value.last_iterate.size == small("sphere_cap").transcribe().x0.size
+
+
+def test_unreachable_min_length_reports_infeasibility():
+    with pytest.raises(rq.InfeasibleDesign, match="min_length"):
+        small("sphere_cap", min_length=1.5).solve()
+
+
+@pytest.mark.parametrize("kw", [{"panels": (7, 8)}, {"layout": "diagonal"}, {"hessian": "bfgs"},
+                                {"fix": ("everything",)}, {"weights": {"shape": 1.0}},
+                                {"omega0": 3.5}, {"alpha0": 2.0}, {"min_angle": 1.0}])
+def test_invalid_options_raise_input_error(kw):
+    with pytest.raises(rq.InputError):
+        small("sphere_cap", **kw)
+
+
+def test_fixed_groups_stay_at_start():
+    prob = small("sphere_cap", fix=("lengths", "omega"), max_iter=30, tol=1e-2)
+    nlp = prob.transcribe()
+    for g in ("lengths", "omega"):
+        np.testing.assert_array_equal(nlp.lbx[nlp.groups[g]], nlp.ubx[nlp.groups[g]])
+    assert np.all(nlp.lbx[nlp.groups["angles"]] < nlp.ubx[nlp.groups["angles"]])
+
+
+def test_progress_callback_receives_every_iteration():
+    seen = []
+    with pytest.raises(rq.SolverFailed):
+        small("sphere_cap", max_iter=3, tol=1e-12).solve(callback=seen.append)
+    assert [s["iter"] for s in seen] == list(range(len(seen))) and len(seen) >= 3
+    assert all(np.isfinite(s["objective"]) and s["inf_pr"] >= 0 for s in seen)
