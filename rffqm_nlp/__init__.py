@@ -11,6 +11,9 @@ from .boundary import BoundaryData, miura_boundary, perturb_angles
 from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
                      RffqmError, SolverFailed, SurfaceError)
 from .pattern import Pattern
+from .marching import fold, march
+from .design import DesignProblem
+from .results import DesignResult
 
 __version__ = "0.1.0"
 
@@ -24,6 +27,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
 
 
-__all__ = ["BoundaryData", "BoundaryDataError", "InfeasibleDesign", "InputError",
-           "MarchingError", "Pattern", "RffqmError", "SolverFailed", "SurfaceError",
-           "miura_boundary", "perturb_angles", *_SUBMODULES]
+__all__ = ["BoundaryData", "BoundaryDataError", "DesignProblem", "DesignResult",
+           "InfeasibleDesign", "InputError", "MarchingError", "Pattern", "RffqmError",
+           "SolverFailed", "SurfaceError", "fold", "march", "miura_boundary", "perturb_angles",
+           *_SUBMODULES]

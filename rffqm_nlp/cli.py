@@ -1,47 +1,120 @@
-"""The ``rffqm`` command: thin wrappers that parse, call the library and write files."""
+"""The ``rffqm`` command: thin wrappers that parse, call the library and write files.
+
+Commands: ``design`` (inverse design of a TOML target, with live IPOPT progress), ``fold``,
+``export`` and ``render`` (of a saved design result), ``targets`` (the built-in surfaces) and
+``march`` (forward marching of a perturbed Miura-ori).
+
+Every user error (missing or bad file, unknown target, a failed marching check, an
+infeasible design, a solver failure) ends with a one-line red reason and exit status 2,
+never a traceback. Files are written atomically; a command that writes several files
+writes them into a hidden temporary sibling folder first and moves them into place only
+when all of them succeeded, so a failure leaves nothing behind.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import os
+import re
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator, Optional
 
 import numpy as np
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
+from typer.core import TyperCommand
 
 from .boundary import LAYOUTS, miura_boundary, perturb_angles
-from .errors import RffqmError
+from .errors import InputError, RffqmError
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+if TYPE_CHECKING:
+    from .design import DesignProblem
+    from .results import DesignResult
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode="markdown",
                   help="Forward and inverse design of rigidly and flat-foldable origami.")
 console = Console(stderr=True)
 
+#: Folding states stored in pattern.fold and drawn in folding.gif by ``design``.
+FRAMES = 24
+#: Resolution (per direction) of the target mesh drawn in render.png.
+TARGET_MESH = 60
+#: File names, by export format.
+EXPORT_NAMES = {"fold": "pattern.fold", "svg": "crease.svg", "pdf": "crease.pdf",
+                "dxf": "crease.dxf", "obj": "folded.obj", "ply": "folded.ply",
+                "glb": "folded.glb"}
+
+
+def _version(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"rffqm-nlp {__version__}")
+        raise typer.Exit()
+
 
 @app.callback()
-def _root() -> None:
+def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
     """rffqm: forward and inverse design of rigidly and flat-foldable origami."""
 
 
+# --------------------------------------------------------------------------- helpers
 @contextmanager
 def user_errors() -> Iterator[None]:
     """Turn the package's named errors into a one-line reason and exit status 2."""
     try:
         yield
     except (RffqmError, OSError) as exc:
-        console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        console.print(f"[bold red]error:[/] {escape(_one_line(exc))}", highlight=False,
+                      soft_wrap=True)
         raise typer.Exit(2) from None
+    except KeyboardInterrupt:
+        console.print("[bold red]interrupted[/]", highlight=False)
+        raise typer.Exit(130) from None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    if isinstance(exc, OSError) and not text:
+        text = type(exc).__name__
+    return text
+
+
+def warn(message: str) -> None:
+    """A yellow one-line warning on stderr."""
+    console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 def prepare_out(out: Path, force: bool) -> None:
     """Create the output folder; refuse a non-empty one without ``force``."""
-    if out.exists() and any(out.iterdir()) and not force:
-        raise FileExistsError(f"{out} exists and is not empty; pass --force to overwrite")
+    check_out_dir(out, force)
     out.mkdir(parents=True, exist_ok=True)
+
+
+def check_out_dir(out: Path, force: bool) -> None:
+    """Refuse an output folder that is a file, or not empty without ``force``, or cannot be
+    created; touches nothing (run it before a long computation)."""
+    if out.exists():
+        if not out.is_dir():
+            raise InputError(f"{out} exists and is not a folder; choose another --out")
+        if any(out.iterdir()) and not force:
+            raise InputError(f"{out} exists and is not empty; pass --force to overwrite "
+                             "(files of the same name are replaced, others are kept)")
+    existing = out.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"cannot create {out}: {existing} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write into {existing} (permission denied)")
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -50,12 +123,424 @@ def write_atomic(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        os.chmod(tmp, _FILE_MODE)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_umask()
+_DIR_MODE = 0o777 & ~_umask()
+
+
+@contextmanager
+def staged_dir(out: Path) -> Iterator[Path]:
+    """Yield a temporary sibling folder of ``out``; on success move its files into ``out``.
+
+    A new ``out`` is the renamed temporary folder; into an existing one every file is moved
+    with :func:`os.replace` (same-named files replaced, other files kept). On an exception
+    the temporary folder is removed and ``out`` is left as it was.
+    """
+    out = Path(os.path.abspath(out))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".partial"))
+    try:
+        yield tmp
+        for path in tmp.rglob("*"):
+            os.chmod(path, _DIR_MODE if path.is_dir() else _FILE_MODE)
+        os.chmod(tmp, _DIR_MODE)
+        if not out.exists():
+            os.rename(tmp, out)
+            return
+        if not out.is_dir():
+            raise InputError(f"{out} exists and is not a folder")
+        for path in sorted(tmp.iterdir()):
+            os.replace(path, out / path.name)
+        tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _parse_panels(text: str) -> tuple[int, int]:
+    """"8,8", "8 8" or "8x8" -> (8, 8)."""
+    parts = [p for p in re.split(r"[,\sx]+", text.strip()) if p]
+    try:
+        values = tuple(int(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2:
+        raise InputError(f"--panels takes two even numbers 2N 2M (or 2N,2M), got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+class _PanelsCommand(TyperCommand):
+    """A command whose ``--panels`` option takes "2N 2M" (two words) as well as "2N,2M"."""
+
+    def parse_args(self, ctx, args: list[str]) -> list[str]:
+        joined: list[str] = []
+        i = 0
+        while i < len(args):
+            if args[i] == "--":
+                joined.extend(args[i:])
+                break
+            if (args[i] == "--panels" and i + 2 < len(args)
+                    and re.fullmatch(r"\d+", args[i + 1])
+                    and re.fullmatch(r"\d+", args[i + 2])):
+                joined += ["--panels", f"{args[i + 1]},{args[i + 2]}"]
+                i += 3
+                continue
+            joined.append(args[i])
+            i += 1
+        return super().parse_args(ctx, joined)
+
+
+def _load_result(directory: Path) -> "DesignResult":
+    """A saved design result, with one-line errors for anything that is not one."""
+    from .results import DesignResult
+
+    try:
+        return DesignResult.load(directory)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        if isinstance(exc, RffqmError):
+            raise
+        raise InputError(f"{directory}: broken design result ({type(exc).__name__}: "
+                         f"{exc}); run rffqm design again") from None
+
+
+def _result_folder(result: Path) -> Path:
+    """The folder of a result given as its folder or as its result.json."""
+    return result if result.is_dir() else result.parent
+
+
+def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
+    """Target-frame points moved into the frame of :func:`marching.fold` (the inverse of
+    the alignment ``y -> rotation @ y + translation`` of ``result.folded``)."""
+    return (np.asarray(points, dtype=float) - result.translation) @ result.rotation
+
+
+def _target_for_render(result: "DesignResult", target=None):
+    """The target surface as a mesh in the pattern frame (or its lattice points when the
+    surface cannot be rebuilt from the saved configuration)."""
+    import trimesh
+
+    from . import surfaces
+
+    if target is None:
+        try:
+            target = surfaces.from_config(result.problem["target"])
+        except (RffqmError, KeyError, TypeError) as exc:
+            warn(f"cannot rebuild the target surface ({_one_line(exc)}); drawing the target "
+                 "lattice points instead")
+            return _pattern_frame(result.target_points.reshape(-1, 3), result)
+    mesh = target.mesh(TARGET_MESH, TARGET_MESH)
+    return trimesh.Trimesh(vertices=_pattern_frame(mesh.vertices, result), faces=mesh.faces,
+                           process=False)
+
+
+def _fold_metadata(result: "DesignResult") -> dict:
+    return {"target": result.problem.get("target", {}), "fit": result.fit}
+
+
+def _write_fold(path: Path, result: "DesignResult", omega: float) -> None:
+    from . import io
+
+    io.write_fold(path, result.pattern, omega, frames=FRAMES, metadata=_fold_metadata(result))
+
+
+def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames: int,
+                  target=None) -> None:
+    from . import viz
+
+    viz.render_png(folder / "render.png", result.pattern, result.omega,
+                   target=_target_for_render(result, target))
+    viz.folding_gif(folder / "folding.gif", result.pattern, omega_end, frames=frames)
+
+
+def _check_omega(omega: float) -> float:
+    if not (math.isfinite(omega) and abs(omega) <= math.pi):
+        raise InputError(f"--omega must lie in [-pi, pi], got {omega:g}")
+    return float(omega)
+
+
+def _check_frames(frames: int) -> None:
+    if frames < 2:
+        raise InputError(f"--frames must be at least 2, got {frames}")
+
+
+# --------------------------------------------------------------------------- design
+@app.command(cls=_PanelsCommand)
+def design(
+    target: Path = typer.Argument(..., help="Design file (TOML) with [target] and [design] "
+                                  "tables, e.g. targets/sphere_cap.toml.", show_default=False),
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder (must be new or empty "
+                             "unless --force).", show_default=False),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No live progress display."),
+    force: bool = typer.Option(False, "--force", help="Write into a non-empty output folder "
+                               "(same-named files are replaced)."),
+    max_iter: Optional[int] = typer.Option(None, "--max-iter", min=1, help="IPOPT iteration "
+                                           "limit (overrides the file's max_iter)."),
+    panels: Optional[str] = typer.Option(None, "--panels", metavar="2N 2M",
+                                         help="Pattern size, two even numbers >= 4: "
+                                         "'--panels 20 20' or '--panels 20,20' (overrides "
+                                         "the file's panels)."),
+) -> None:
+    """Design a crease pattern that folds into the target surface of TARGET.
+
+    Solves the inverse problem with IPOPT (live progress: iteration, objective, constraint
+    violation, elapsed time), prints the fit, and writes into OUT: result.json (the saved
+    result), pattern.fold (24 states from flat to the designed omega), crease.svg/.pdf/.dxf,
+    folded.obj/.glb, render.png and folding.gif (when off-screen rendering works) and
+    convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
+    (x_a^11 = 0); result.json also holds the folded state aligned onto the target.
+    """
+    from .design import DesignProblem
+
+    with user_errors():
+        problem = DesignProblem.load(target)
+        changes: dict = {}
+        if panels is not None:
+            changes["panels"] = _parse_panels(panels)
+        if max_iter is not None:
+            changes["max_iter"] = max_iter
+        if changes:
+            problem = dataclasses.replace(problem, **changes)
+        check_out_dir(out, force)          # before the solve: never waste a long solve
+        result = _solve(problem, quiet)
+        with staged_dir(out) as tmp:
+            _write_design(tmp, result, problem)
+    Console().print(_summary(result, out))
+
+
+def _solve(problem: "DesignProblem", quiet: bool) -> "DesignResult":
+    """Solve, with a live progress display unless ``quiet`` (on a terminal; elsewhere, as
+    in a log file, a plain line every few seconds)."""
+    if quiet:
+        return problem.solve()
+    if not console.is_terminal:
+        return _solve_logged(problem)
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    columns = (SpinnerColumn(), TextColumn("[bold]{task.description}"),
+               TextColumn("iteration {task.fields[iter]:>5} / " + str(problem.max_iter)),
+               TextColumn("objective {task.fields[objective]:>10}"),
+               TextColumn("violation {task.fields[inf_pr]:>9}"), TimeElapsedColumn())
+    N, M = problem.panels
+    with Progress(*columns, console=console, transient=True) as progress:
+        task = progress.add_task(f"building the {N} x {M} NLP", iter="-", objective="-",
+                                 inf_pr="-")
+
+        def update(entry: dict) -> None:
+            progress.update(task, description="IPOPT", iter=entry["iter"],
+                            objective=f"{entry['objective']:.4e}",
+                            inf_pr=f"{entry['inf_pr']:.2e}")
+
+        return problem.solve(callback=update)
+
+
+def _solve_logged(problem: "DesignProblem", every: float = 10.0) -> "DesignResult":
+    """Solve, printing one progress line at most every ``every`` seconds."""
+    last = [-every]
+
+    def update(entry: dict) -> None:
+        if entry["elapsed"] - last[0] >= every:
+            last[0] = entry["elapsed"]
+            console.print(f"IPOPT iteration {entry['iter']}: objective "
+                          f"{entry['objective']:.4e}, violation {entry['inf_pr']:.2e}, "
+                          f"{entry['elapsed']:.0f} s", highlight=False)
+
+    return problem.solve(callback=update)
+
+
+def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem") -> None:
+    """Every output file of ``design`` into ``folder``."""
+    from . import io, viz
+
+    pat, omega = result.pattern, result.omega
+    result.save(folder)
+    _write_fold(folder / "pattern.fold", result, omega)
+    io.write_svg(folder / "crease.svg", pat, omega)
+    io.write_pdf(folder / "crease.pdf", pat, omega)
+    io.write_dxf(folder / "crease.dxf", pat, omega)
+    io.write_mesh(folder / "folded.obj", pat, omega)
+    io.write_mesh(folder / "folded.glb", pat, omega)
+    viz.plot_convergence(result.stats["history"], folder / "convergence.png")
+    ok, reason = viz.rendering_available()
+    if ok:
+        _render_files(folder, result, omega, FRAMES, target=problem.target)
+    else:
+        warn(f"render.png and folding.gif skipped: {reason}")
+
+
+def _summary(result: "DesignResult", out: Path) -> Table:
+    fit, stats = result.fit, result.stats
+    N, M = result.pattern.N, result.pattern.M
+    table = Table(title=f"design: {N} x {M} panels")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("fit RMS to the target lattice (/ diameter)", f"{fit['rms']:.3e}")
+    table.add_row("fit RMS to the target surface (/ diameter)", f"{fit['rms_surface']:.3e}")
+    table.add_row("Hausdorff distance (/ diameter)", f"{fit['hausdorff']:.3e}")
+    table.add_row("best plane RMS, for comparison (/ diameter)", f"{fit['plane_rms']:.3e}")
+    table.add_row("smallest side / mean side", f"{fit['min_side_over_mean']:.4g}")
+    table.add_row("smallest sector angle (rad)", f"{fit['min_sector_angle']:.4g}")
+    table.add_row("designed omega (rad)", f"{result.omega:.6g}")
+    table.add_row("iterations", str(stats.get("iterations", "?")))
+    total = float(stats.get("build_time", 0.0)) + float(stats.get("solve_time", 0.0))
+    table.add_row("time (s)", f"{total:.1f} (build {stats.get('build_time', 0.0):.1f})")
+    table.add_row("status", str(stats.get("status", "?")))
+    table.add_row("output", str(out))
+    return table
+
+
+# --------------------------------------------------------------------------- fold
+@app.command("fold")
+def fold_cmd(
+    result_dir: Path = typer.Argument(..., help="Folder of a saved design (result.json).",
+                                      show_default=False),
+    omega: Optional[float] = typer.Option(None, help="One fold parameter in [-pi, pi]."),
+    frames: Optional[int] = typer.Option(None, help="K states from flat to the designed "
+                                         "omega."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="JSON file to write "
+                                       "(default: print to stdout)."),
+    aligned: bool = typer.Option(False, "--aligned", help="Move the states rigidly onto the target (the "
+                                 "frame of result.folded) instead of the pattern frame."),
+) -> None:
+    """Folded vertices of a saved design at one omega (--omega) or K omegas (--frames).
+
+    Writes JSON {"omega": w or [w...], "frame": "pattern" or "target", "Y": ...} with Y of
+    shape (2N+1, 2M+1, 3), or (K, 2N+1, 2M+1, 3) for --frames.
+    """
+    from . import marching
+
+    with user_errors():
+        if (omega is None) == (frames is None):
+            raise InputError("give exactly one of --omega W or --frames K")
+        result = _load_result(result_dir)
+        if frames is not None:
+            if frames < 1:
+                raise InputError(f"--frames must be at least 1, got {frames}")
+            om = np.linspace(0.0, result.omega, frames)
+        else:
+            om = _check_omega(omega)
+        Y = marching.fold(result.pattern, om)
+        if aligned:
+            Y = Y @ result.rotation.T + result.translation
+        data = json.dumps({"omega": om.tolist() if isinstance(om, np.ndarray) else om,
+                           "frame": "target" if aligned else "pattern",
+                           "designed_omega": result.omega, "Y": Y.tolist()})
+        if out is None:
+            typer.echo(data)
+        else:
+            write_atomic(out, data.encode())
+            console.print(f"wrote {escape(str(out))}", highlight=False)
+
+
+# --------------------------------------------------------------------------- export
+@app.command()
+def export(
+    result_dir: Path = typer.Argument(..., help="Folder of a saved design (result.json).",
+                                      show_default=False),
+    format: str = typer.Option(..., "--format", "-f", help="One of "
+                               f"{', '.join(EXPORT_NAMES)}.", show_default=False),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write (default: "
+                                       "RESULT_DIR/pattern.fold, crease.<fmt> or "
+                                       "folded.<fmt>)."),
+    omega: Optional[float] = typer.Option(None, help="Fold parameter (default: the designed "
+                                          "omega)."),
+) -> None:
+    """Export a saved design: FOLD, a crease pattern (SVG, DXF, PDF) or a mesh (OBJ, PLY, GLB).
+
+    Crease assignments and meshes are those at omega; the FOLD file holds 24 states from
+    flat to omega.
+    """
+    from . import io
+
+    with user_errors():
+        fmt = format.lower().lstrip(".")
+        if fmt not in EXPORT_NAMES:
+            raise InputError(f"unknown format {format!r}; choose one of "
+                             f"{', '.join(EXPORT_NAMES)}")
+        result = _load_result(result_dir)
+        om = result.omega if omega is None else _check_omega(omega)
+        path = out if out is not None else _result_folder(result_dir) / EXPORT_NAMES[fmt]
+        if fmt in ("obj", "ply", "glb") and path.suffix.lower() != f".{fmt}":
+            raise InputError(f"--format {fmt} writes a .{fmt} file, got {path}")
+        if fmt == "fold":
+            _write_fold(path, result, om)
+        elif fmt == "svg":
+            io.write_svg(path, result.pattern, om)
+        elif fmt == "pdf":
+            io.write_pdf(path, result.pattern, om)
+        elif fmt == "dxf":
+            io.write_dxf(path, result.pattern, om)
+        else:
+            io.write_mesh(path, result.pattern, om)
+    console.print(f"wrote {escape(str(path))}", highlight=False)
+
+
+# --------------------------------------------------------------------------- render
+@app.command()
+def render(
+    result_dir: Path = typer.Argument(..., help="Folder of a saved design (result.json).",
+                                      show_default=False),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder (default: "
+                                       "RESULT_DIR)."),
+    frames: int = typer.Option(FRAMES, help="States in folding.gif."),
+) -> None:
+    """Render a saved design: render.png (the designed state with the target) and
+    folding.gif (the whole motion, from flat to folded flat)."""
+    from . import viz
+
+    with user_errors():
+        _check_frames(frames)
+        result = _load_result(result_dir)
+        ok, reason = viz.rendering_available()
+        if not ok:
+            raise RffqmError(f"cannot render: {reason}")
+        folder = out if out is not None else _result_folder(result_dir)
+        check_out_dir(folder, force=True)
+        omega_end = math.copysign(math.pi, result.omega)
+        with staged_dir(folder) as tmp:
+            _render_files(tmp, result, omega_end, frames)
+    console.print(f"wrote {escape(str(folder / 'render.png'))} and "
+                  f"{escape(str(folder / 'folding.gif'))}", highlight=False)
+
+
+# --------------------------------------------------------------------------- targets
+@app.command()
+def targets() -> None:
+    """List the built-in target surfaces with their parameters and default domains.
+
+    Use one in a design file as [target] name = "<surface>" plus any parameters and
+    domain = [[u0, u1], [v0, v1]].
+    """
+    from . import surfaces
+
+    table = Table(title="built-in target surfaces", show_lines=True)
+    table.add_column("name", style="bold", no_wrap=True)
+    table.add_column("parameters (defaults)")
+    table.add_column("default domain")
+    table.add_column("description")
+    with user_errors():
+        for name in surfaces.names():
+            text = surfaces.describe(name)
+            doc = text.removeprefix(f"{name}: ").split(" Parameters:")[0]
+            surf = surfaces.get(name)
+            params = ", ".join(f"{k} = {v:g}" for k, v in surf.params.items()) or "-"
+            domain = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in surf.domain)
+            table.add_row(name, params, domain, doc)
+    Console().print(table)
+
+
+# --------------------------------------------------------------------------- march
 @app.command()
 def march(
     out: Path = typer.Option(Path("runs/march"), help="Output folder."),
@@ -70,13 +555,14 @@ def march(
     lp: bool = typer.Option(False, help="Side lengths from the paper's LP (eq:linearP)."),
     omega: float = typer.Option(2.0, help="Fold parameter in [-pi, pi]."),
     frames: int = typer.Option(0, min=0, help="Also write K states from flat to omega."),
-    force: bool = typer.Option(False, help="Overwrite a non-empty output folder."),
+    force: bool = typer.Option(False, "--force", help="Overwrite a non-empty output folder."),
 ) -> None:
     """March a (perturbed) Miura crease pattern and fold it; write the pattern and vertices."""
     from . import marching
     from .lengths import length_spread, side_length_lp
 
     with user_errors():
+        check_out_dir(out, force)
         bd = miura_boundary(rows, cols, a=a, b=b, alpha0=alpha0, layout=layout)
         if perturb > 0:
             bd = perturb_angles(bd, perturb, seed)
@@ -84,15 +570,16 @@ def march(
             bd = side_length_lp(bd)
         pat = marching.march(bd)
         Y = marching.fold(pat, omega)
-        prepare_out(out, force)
-        write_atomic(out / "boundary.json", json.dumps(bd.to_dict()).encode())
-        write_atomic(out / "pattern.json", json.dumps(pat.to_dict()).encode())
-        write_atomic(out / "folded.json", json.dumps({"omega": omega, "Y": Y.tolist()}).encode())
-        if frames:
-            om = np.linspace(0.0, omega, frames)
-            states = marching.fold(pat, om)
-            write_atomic(out / "frames.json",
-                         json.dumps({"omega": om.tolist(), "Y": states.tolist()}).encode())
+        with staged_dir(out) as tmp:
+            write_atomic(tmp / "boundary.json", json.dumps(bd.to_dict()).encode())
+            write_atomic(tmp / "pattern.json", json.dumps(pat.to_dict()).encode())
+            write_atomic(tmp / "folded.json",
+                         json.dumps({"omega": omega, "Y": Y.tolist()}).encode())
+            if frames:
+                om = np.linspace(0.0, omega, frames)
+                states = marching.fold(pat, om)
+                write_atomic(tmp / "frames.json",
+                             json.dumps({"omega": om.tolist(), "Y": states.tolist()}).encode())
     spread = length_spread(pat.lh, pat.lv)
     table = Table(title=f"{rows} x {cols} panels, omega = {omega:g}")
     table.add_column("quantity")

@@ -1,0 +1,357 @@
+"""The rffqm command: every command's files, and a one-line reason for every user error.
+
+One real design (an 8 x 8 sphere cap, ~20 s) runs once per module; the other tests reuse
+its output folder, or replace the solve by the saved result where only the file handling
+is under test.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+from rffqm_nlp import io as rio
+from rffqm_nlp import marching, surfaces, viz
+from rffqm_nlp.cli import app
+from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.errors import SolverFailed
+from rffqm_nlp.results import DesignResult
+
+runner = CliRunner()
+
+SMALL = """
+[target]
+name = "sphere_cap"
+radius = 4.0
+
+[design]
+panels = [8, 8]
+{extra}
+"""
+DESIGN_FILES = {"result.json", "pattern.fold", "crease.svg", "crease.pdf", "crease.dxf",
+                "folded.obj", "folded.glb", "convergence.png"}
+RENDER_FILES = {"render.png", "folding.gif"}
+N_VERTICES = 9 * 9
+
+
+def invoke(*args: str):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    return struct.unpack(">II", data[16:24])
+
+
+def assert_user_error(res, *fragments: str) -> str:
+    """Non-zero exit, no traceback, exactly one error line that names every fragment."""
+    assert res.exit_code != 0, res.output
+    assert isinstance(res.exception, (SystemExit, type(None))), repr(res.exception)
+    assert "Traceback" not in res.output
+    errors = [ln for ln in res.output.splitlines() if "error" in ln.lower()]
+    assert len(errors) == 1, res.output
+    for fragment in fragments:
+        assert fragment in errors[0], (fragment, res.output)
+    return errors[0]
+
+
+def write_toml(folder: Path, name: str, extra: str = "") -> Path:
+    path = folder / name
+    path.write_text(SMALL.format(extra=extra))
+    return path
+
+
+def leftovers(folder: Path) -> list[str]:
+    """Hidden temporary files or folders the commands might have left in ``folder``."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+@pytest.fixture(scope="module")
+def designed(tmp_path_factory):
+    base = tmp_path_factory.mktemp("design")
+    toml = write_toml(base, "cap.toml")
+    out = base / "runs" / "cap"
+    res = invoke("design", toml, "--out", out)
+    assert res.exit_code == 0, res.output
+    return out, res
+
+
+@pytest.fixture(scope="module")
+def result(designed) -> DesignResult:
+    return DesignResult.load(designed[0])
+
+
+@pytest.fixture
+def fake_solve(monkeypatch, result):
+    """Replace the IPOPT solve by the module's saved result (file handling tests)."""
+    monkeypatch.setattr(DesignProblem, "solve", lambda self, **kw: result)
+
+
+# --------------------------------------------------------------------------- design
+def test_design_writes_every_file(designed, result):
+    out, res = designed
+    rendering, reason = viz.rendering_available()
+    names = {p.name for p in out.iterdir()}
+    assert names == DESIGN_FILES | (RENDER_FILES if rendering else set())
+    assert leftovers(out.parent) == []
+    for word in ("Hausdorff", "smallest side / mean", "smallest sector angle", "iterations",
+                 "Solve_Succeeded"):
+        assert word in res.output
+    if not rendering:
+        assert "warning" in res.output and reason.split()[0] in res.output
+
+    assert result.stats["success"] and result.pattern.N == 8 and result.pattern.M == 8
+    assert result.fit["rms"] < result.fit["plane_rms"]
+    pat, omega, meta = rio.read_fold(out / "pattern.fold")
+    assert omega == pytest.approx(result.omega)
+    np.testing.assert_allclose(pat.X, result.pattern.X)
+    assert meta["target"]["name"] == "sphere_cap" and meta["fit"] == result.fit
+    frames = json.loads((out / "pattern.fold").read_text())["file_frames"]
+    assert len(frames) == 24
+    assert frames[0]["rffqm:omega"] == 0.0
+    assert frames[-1]["rffqm:omega"] == pytest.approx(result.omega)
+    for name in ("folded.obj", "folded.glb"):
+        mesh = trimesh.load(out / name, force="mesh", process=False)
+        assert len(mesh.vertices) == N_VERTICES and len(mesh.faces) == 2 * 64
+    assert (out / "crease.svg").read_text().lstrip().startswith("<?xml")
+    assert (out / "crease.pdf").read_bytes()[:5] == b"%PDF-"
+    import ezdxf
+
+    assert len(ezdxf.readfile(out / "crease.dxf").modelspace().query("LINE")) == 2 * 8 * 9
+    assert png_size(out / "convergence.png")[0] > 100
+    if rendering:
+        assert png_size(out / "render.png") == (800, 600)
+        assert (out / "folding.gif").read_bytes()[:6] == b"GIF89a"
+
+
+def test_design_panels_two_words_and_progress_lines(tmp_path, monkeypatch):
+    seen = {}
+
+    def failing(self, callback=None, **kw):
+        seen["panels"], seen["max_iter"] = self.panels, self.max_iter
+        if callback is not None:
+            callback({"iter": 0, "objective": 1.0, "inf_pr": 0.5, "elapsed": 0.0})
+        raise SolverFailed("IPOPT did not converge: status Stop_Here", status="Stop_Here")
+
+    monkeypatch.setattr(DesignProblem, "solve", failing)
+    toml = write_toml(tmp_path, "t.toml")
+    for panels in (["--panels", "4", "6"], ["--panels", "4,6"]):
+        res = invoke("design", toml, *panels, "--max-iter", "7", "--out", tmp_path / "o")
+        assert_user_error(res, "Stop_Here")
+        assert seen == {"panels": (4, 6), "max_iter": 7}
+        assert "IPOPT iteration 0" in res.output       # the plain progress line (no terminal)
+    res = invoke("design", "--panels", "6", "4", toml, "--out", tmp_path / "o", "--quiet")
+    assert_user_error(res, "Stop_Here")
+    assert seen["panels"] == (6, 4) and "IPOPT iteration" not in res.output
+    assert not (tmp_path / "o").exists() and leftovers(tmp_path) == []
+
+
+def test_design_without_rendering_warns_and_force_keeps_other_files(tmp_path, fake_solve,
+                                                                    monkeypatch):
+    monkeypatch.setattr(viz, "rendering_available", lambda: (False, "no OpenGL here"))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "crease.svg").write_text("old")
+    res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", out, "--force")
+    assert res.exit_code == 0, res.output
+    assert "warning" in res.output and "no OpenGL here" in res.output
+    assert {p.name for p in out.iterdir()} == DESIGN_FILES | {"notes.txt"}
+    assert (out / "notes.txt").read_text() == "mine"
+    assert (out / "crease.svg").read_text() != "old"
+    assert leftovers(tmp_path) == []
+    DesignResult.load(out)
+
+
+def test_failure_after_the_solve_leaves_no_files(tmp_path, fake_solve, monkeypatch):
+    def broken(*args, **kw):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(rio, "write_dxf", broken)
+    out = tmp_path / "deep" / "out"
+    res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", out, "-q")
+    assert_user_error(res, "No space left on device")
+    assert not out.exists() and leftovers(tmp_path / "deep") == []
+
+
+# --------------------------------------------------------------------------- fold
+def test_fold_one_omega_to_stdout(designed, result):
+    res = invoke("fold", designed[0], "--omega", "1.0")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["omega"] == 1.0 and data["frame"] == "pattern"
+    assert np.asarray(data["Y"]).shape == (9, 9, 3)
+
+
+def test_fold_frames_to_file(designed, result, tmp_path):
+    path = tmp_path / "states.json"
+    res = invoke("fold", designed[0], "--frames", "5", "--aligned", "--out", path)
+    assert res.exit_code == 0, res.output
+    data = json.loads(path.read_text())
+    Y = np.asarray(data["Y"])
+    assert Y.shape == (5, 9, 9, 3) and data["frame"] == "target"
+    np.testing.assert_allclose(data["omega"], np.linspace(0, result.omega, 5))
+    np.testing.assert_allclose(Y[-1], result.folded, atol=1e-9)
+    assert leftovers(tmp_path) == []
+
+
+# --------------------------------------------------------------------------- export
+@pytest.mark.parametrize("fmt", ["fold", "svg", "dxf", "pdf", "obj", "ply", "glb"])
+def test_export_every_format(designed, result, tmp_path, fmt):
+    path = tmp_path / f"x.{fmt}"
+    res = invoke("export", designed[0], "--format", fmt, "--out", path, "--omega", "1.5")
+    assert res.exit_code == 0, res.output
+    assert path.stat().st_size > 0
+    if fmt == "fold":
+        pat, omega, _ = rio.read_fold(path)
+        assert omega == 1.5 and pat.N == 8
+    elif fmt in ("obj", "ply", "glb"):
+        mesh = trimesh.load(path, force="mesh", process=False)
+        assert len(mesh.vertices) == N_VERTICES
+        np.testing.assert_allclose(np.asarray(mesh.vertices).reshape(9, 9, 3),
+                                   marching.fold(result.pattern, 1.5), atol=1e-5)
+    assert leftovers(tmp_path) == []
+
+
+# --------------------------------------------------------------------------- render, targets
+def test_render(designed, tmp_path):
+    ok, reason = viz.rendering_available()
+    if not ok:
+        pytest.skip(reason)
+    out = tmp_path / "pictures"
+    res = invoke("render", designed[0], "--out", out, "--frames", "4")
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} == RENDER_FILES
+    assert png_size(out / "render.png") == (800, 600)
+    import imageio.v3 as iio
+
+    assert iio.imread(out / "folding.gif", index=None).shape[0] == 4
+
+
+def test_render_without_rendering_fails_cleanly(designed, tmp_path, monkeypatch):
+    monkeypatch.setattr(viz, "rendering_available", lambda: (False, "no OpenGL here"))
+    res = invoke("render", designed[0], "--out", tmp_path / "p")
+    assert_user_error(res, "cannot render", "no OpenGL here")
+    assert not (tmp_path / "p").exists()
+
+
+def test_targets_lists_every_builtin():
+    res = invoke("targets")
+    assert res.exit_code == 0, res.output
+    for name in surfaces.names():
+        assert name in res.output
+    assert "radius" in res.output
+
+
+@pytest.mark.parametrize("command", [[], ["design"], ["fold"], ["export"], ["render"],
+                                     ["targets"], ["march"]])
+def test_help(command):
+    res = invoke(*command, "--help")
+    assert res.exit_code == 0 and "Usage" in res.output
+
+
+def test_march_still_works(tmp_path):
+    out = tmp_path / "m"
+    res = invoke("march", "--rows", "4", "--cols", "5", "--out", out, "--frames", "3")
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} == {"boundary.json", "pattern.json",
+                                               "folded.json", "frames.json"}
+    assert np.asarray(json.loads((out / "frames.json").read_text())["Y"]).shape == (3, 5, 6, 3)
+
+
+# --------------------------------------------------------------------------- user errors
+def test_design_missing_file(tmp_path):
+    res = invoke("design", tmp_path / "nothere.toml", "--out", tmp_path / "o")
+    assert_user_error(res, "no such design file", "nothere.toml")
+    assert not (tmp_path / "o").exists()
+
+
+def test_design_bad_toml(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("[target\nname = 1\n")
+    assert_user_error(invoke("design", path, "--out", tmp_path / "o"), "not valid TOML")
+    assert not (tmp_path / "o").exists()
+
+
+def test_design_unknown_target(tmp_path):
+    path = tmp_path / "blob.toml"
+    path.write_text('[target]\nname = "blob"\n')
+    assert_user_error(invoke("design", path, "--out", tmp_path / "o"),
+                      "unknown surface 'blob'", "sphere_cap")
+    assert not (tmp_path / "o").exists()
+
+
+def test_design_refuses_non_empty_folder_before_solving(tmp_path, monkeypatch):
+    def never(self, **kw):
+        raise AssertionError("the solve ran before the output folder was checked")
+
+    monkeypatch.setattr(DesignProblem, "solve", never)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", out)
+    assert_user_error(res, "not empty", "--force")
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]
+
+
+def test_design_infeasible(tmp_path):
+    res = invoke("design", write_toml(tmp_path, "t.toml", "min_length = 1.5"),
+                 "--out", tmp_path / "o", "--quiet")
+    line = assert_user_error(res, "min_length")
+    assert res.output.strip() == line.strip()
+    assert not (tmp_path / "o").exists() and leftovers(tmp_path) == []
+
+
+def test_design_solver_failure_names_status(tmp_path):
+    res = invoke("design", write_toml(tmp_path, "t.toml", "max_iter = 1"),
+                 "--out", tmp_path / "o", "--quiet")
+    line = assert_user_error(res, "Maximum_Iterations_Exceeded")
+    assert res.output.strip() == line.strip()
+    assert not (tmp_path / "o").exists() and leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("panels", ["7", "7 8", "a,b"])
+def test_design_bad_panels(tmp_path, panels):
+    res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", tmp_path / "o",
+                 "--panels", *panels.split())
+    assert_user_error(res, "panels")
+
+
+def test_march_failing_final_check(tmp_path):
+    out = tmp_path / "m"
+    res = invoke("march", "--rows", "10", "--cols", "10", "--perturb", "0.157", "--seed", "0",
+                 "--out", out)
+    assert_user_error(res, "final check", "panel (")
+    assert not out.exists() and leftovers(tmp_path) == []
+
+
+def test_result_commands_on_missing_or_broken_results(tmp_path):
+    missing = tmp_path / "none"
+    for args in (["fold", missing, "--omega", "1"], ["export", missing, "-f", "svg"],
+                 ["render", missing]):
+        assert_user_error(invoke(*args), "no design result")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "result.json").write_text("{not json")
+    assert_user_error(invoke("fold", broken, "--frames", "3"), "not valid JSON")
+    (broken / "result.json").write_text(json.dumps({"format": "something else"}))
+    assert_user_error(invoke("export", broken, "-f", "obj"), "not a design result")
+
+
+def test_result_command_option_errors(designed, tmp_path):
+    out = designed[0]
+    assert_user_error(invoke("fold", out), "exactly one of --omega")
+    assert_user_error(invoke("fold", out, "--omega", "1", "--frames", "3"), "exactly one")
+    assert_user_error(invoke("fold", out, "--omega", "4"), "[-pi, pi]")
+    assert_user_error(invoke("export", out, "-f", "stl", "--out", tmp_path / "x.stl"),
+                      "unknown format 'stl'")
+    assert_user_error(invoke("export", out, "-f", "svg", "--out", tmp_path / "no" / "x.svg"),
+                      "No such file or directory")
+    assert list(tmp_path.iterdir()) == []
