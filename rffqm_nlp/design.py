@@ -251,7 +251,7 @@ class DesignProblem:
         opts: dict[str, Any] = {
             "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
             "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
-            "print_time": verbose, "ipopt.sb": "yes"}
+            "print_time": verbose, "ipopt.sb": "yes", "expand": True}
         if self.time_limit is not None:
             opts["ipopt.max_wall_time"] = float(self.time_limit)
         if self.hessian == "limited-memory":
