@@ -22,12 +22,11 @@ import numpy as np
 from . import numpy_model, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed
-from .marching import pattern_function
 from .results import DesignResult
 
 PI = np.pi
 DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1}
-TRANSCRIPTIONS = ("sequential",)
+TRANSCRIPTIONS = ("sequential", "simultaneous")
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
 _INFEASIBLE = ("Infeasible_Problem_Detected",)
@@ -68,7 +67,9 @@ class DesignProblem:
     * ``continuation``: multipliers of the regularization weight for successive solves, each
       warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
       fit improve; the default is one solve);
-    * ``transcription``: "sequential"; ``hessian``: "gauss-newton" (J^T J of the residuals),
+    * ``transcription``: "sequential" (the marching graph as a function of the boundary
+      data) or "simultaneous" (all pattern and kinematic quantities as variables, the marching
+      equations as sparse equality constraints); ``hessian``: "gauss-newton" (J^T J of the residuals),
       "exact" or "limited-memory" (L-BFGS);
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits.
     """
@@ -160,40 +161,17 @@ class DesignProblem:
         return Start(boundary=bd, omega=self.omega0, target_points=target_points,
                      spacing=0.5 * (t_i + t_j), rotation=R, translation=t)
 
-    # ------------------------------------------------------------------ constraints
-    def _constraints(self, start: Start):
-        """The inline constraints g(pattern inputs) with their bounds."""
-        pattern = pattern_function(2 * self.N, 2 * self.M)
-        mu0 = pattern.call([ca.DM(a) for a in _pattern_inputs(start.boundary)])[5].full()
-        outside = np.abs(mu0.ravel(order="F")) > 1
-        m = self.mu_margin
-        lo_angle, hi_angle = self.min_angle, PI - self.min_angle
-
-        def constraints(inputs):
-            alpha, beta, _, lh, lv, mu = pattern.call(inputs)[:6]
-            sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
-            mean = ca.sum1(sides) / sides.numel()
-            angles = ca.vertcat(ca.vec(alpha), ca.vec(beta))
-            mu_side = ca.DM(np.where(outside, 1.0, -1.0)) * (ca.vec(mu) ** 2 - 1)
-            g = ca.vertcat(angles, mu_side, sides / mean - self.min_length)
-            na, nm, ns = angles.numel(), mu_side.numel(), sides.numel()
-            lbg = np.concatenate([np.full(na, lo_angle),
-                                  np.where(outside, (1 + m) ** 2 - 1, 1 - (1 - m) ** 2),
-                                  np.zeros(ns)])
-            ubg = np.concatenate([np.full(na, hi_angle), np.full(nm + ns, np.inf)])
-            return g, lbg, ubg
-
-        return constraints
-
     def transcribe(self, start: Start | None = None,
                    weights: dict[str, float] | None = None) -> transcription.NLP:
         """The NLP of this problem in the chosen transcription (``weights`` override)."""
         start = start or self.start()
-        return transcription.sequential(
-            start.boundary, start.omega, (start.rotation, start.translation),
-            start.target_points, weights or self.weights, start.spacing,
-            (self.min_angle, PI - self.min_angle), self.omega_bounds, self.fix,
-            self._constraints(start))
+        setup = transcription.Setup(
+            boundary=start.boundary, omega=start.omega, rotation=start.rotation,
+            translation=start.translation, target=start.target_points, spacing=start.spacing,
+            weights=weights or self.weights, min_angle=self.min_angle,
+            min_length=self.min_length, mu_margin=self.mu_margin,
+            omega_bounds=self.omega_bounds, fixed=self.fix)
+        return getattr(transcription, self.transcription)(setup)
 
     # ------------------------------------------------------------------ solve
     def solve(self, callback: Callable[[dict], None] | None = None,
@@ -273,7 +251,7 @@ class DesignProblem:
     def _result(self, nlp: transcription.NLP, start: Start, x: np.ndarray,
                 stats: dict) -> DesignResult:
         """Re-march the solution with the NumPy model, check it, measure the fit."""
-        vec, omega, _, _ = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
+        vec, omega = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
         omega = float(omega[0])
         bd = BoundaryData.from_vector(vec, start.boundary.sigma, 2 * self.N, 2 * self.M)
         try:
@@ -369,10 +347,6 @@ def design_fit(coarse: np.ndarray, target_points: np.ndarray,
     surface = shape.relative_fit(coarse, target)
     return {"rms": rms / diameter, "rms_surface": surface["rms"],
             "hausdorff": surface["hausdorff"], "plane_rms": float(plane / diameter)}
-
-
-def _pattern_inputs(bd: BoundaryData) -> list[np.ndarray]:
-    return [bd.left.T, bd.bottom.T, bd.l_left[None, :], bd.l_bottom[None, :]]
 
 
 def _choice(name: str, value: str, options: tuple[str, ...]) -> None:

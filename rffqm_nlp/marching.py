@@ -97,7 +97,7 @@ def pattern_function(N: int, M: int) -> ca.Function:
         ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "Xx", "Xy"])
 
 
-def _directions(alpha, beta):
+def edge_directions(alpha, beta):
     """Directions of the horizontal edges (N+1 x M+1; the last column is auxiliary).
 
     Accumulated sector angles (PAPER_NOTES s.4): along the left column the direction turns by
@@ -111,7 +111,7 @@ def _directions(alpha, beta):
 
 def _flat_positions(alpha, beta, lh, lv):
     """Flat vertex positions as cumulative sums of edge vectors (stable, PAPER_NOTES s.4)."""
-    theta_h = _directions(alpha, beta)
+    theta_h = edge_directions(alpha, beta)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
     bottom_x = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.cos(theta_h[0, :-1]), 1))
     bottom_y = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.sin(theta_h[0, :-1]), 1))
@@ -152,7 +152,19 @@ def _crease_quaternion(theta, k, c, s, sign=1.0):
     return w, sh * ca.cos(theta), sh * ca.sin(theta), 0 * w
 
 
-def _qmul(p, q):
+@lru_cache(maxsize=None)
+def panel_quaternions_function(N: int, M: int) -> ca.Function:
+    """Pattern and omega -> the 4 components (N x M) of every panel's rotation quaternion."""
+    alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
+    lh = ca.MX.sym("lh", N + 1, M)
+    lv = ca.MX.sym("lv", N, M + 1)
+    omega = ca.MX.sym("omega")
+    _, quat = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    return ca.Function("panel_quaternions", [alpha, beta, sigma, lh, lv, omega], quat)
+
+
+def qmul(p, q):
+    """Quaternion product p q, componentwise on (w, x, y, z) sequences of matrices."""
     pw, px, py, pz = p
     qw, qx, qy, qz = q
     return (pw * qw - px * qx - py * qy - pz * qz,
@@ -165,7 +177,7 @@ def _qmul(p, q):
 def _qmul_step(width: int) -> ca.Function:
     P = ca.MX.sym("P", 4, width)
     Q = ca.MX.sym("Q", 4, width)
-    prod = _qmul([P[k, :] for k in range(4)], [Q[k, :] for k in range(4)])
+    prod = qmul([P[k, :] for k in range(4)], [Q[k, :] for k in range(4)])
     return ca.Function("qmul", [P, Q], [ca.vertcat(*prod)])
 
 
@@ -196,7 +208,7 @@ def fold_function(N: int, M: int) -> ca.Function:
     lh = ca.MX.sym("lh", N + 1, M)
     lv = ca.MX.sym("lv", N, M + 1)
     omega = ca.MX.sym("omega")
-    Yx, Yy, Yz = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    (Yx, Yy, Yz), _ = _fold_expr(alpha, beta, sigma, lh, lv, omega)
     return ca.Function("fold", [alpha, beta, sigma, lh, lv, omega], [Yx, Yy, Yz],
                        ["alpha", "beta", "sigma", "lh", "lv", "omega"], ["Yx", "Yy", "Yz"])
 
@@ -213,36 +225,58 @@ def folded_function(N: int, M: int) -> ca.Function:
     inputs = pattern.mx_in()
     alpha, beta, sigma, lh, lv, *_ = pattern.call(inputs)
     omega = ca.MX.sym("omega")
-    Y = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    Y, _ = _fold_expr(alpha, beta, sigma, lh, lv, omega)
     return ca.Function("folded", [*inputs, omega], list(Y),
                        [*pattern.name_in(), "omega"], ["Yx", "Yy", "Yz"])
 
 
-def _fold_expr(alpha, beta, sigma, lh, lv, omega):
-    N, M = lv.shape[0], lh.shape[1]
+def crease_quaternions(alpha, beta, sigma, theta_h, omega):
+    """Rotation quaternions of the creases the kinematics march crosses (eq:defGrads).
+
+    Returns (qv, qh): qv for the vertical creases of the bottom row, R_{t2}(-gamma2^{1j}),
+    j = 2..M (4 components, 1 x M-1), and qh for the horizontal creases R_{t1}(gamma1^{ij}),
+    i = 2..N, j = 1..M (4 components, N-1 x M).
+    """
+    N, M = alpha.shape[0] - 1, alpha.shape[1] - 1
     c, s = ca.cos(omega / 2), ca.sin(omega / 2)
     kh, kv = fold_multipliers(alpha, beta, sigma)
-    theta_h = _directions(alpha, beta)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
-    # Bottom row: R^{1j} = R^{1(j-1)} R_{t2}(-gamma2^{1j}) (eq:defGrads).
     qv = _crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
-    q_row1 = _cumulative_qprod(ca.DM([1, 0, 0, 0]), ca.vertcat(*qv), M - 1, 1)
-    # Later rows: R^{ij} = R^{(i-1)j} R_{t1}(gamma1^{ij}).
     qh = _crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
-    steps = ca.vertcat(*(ca.reshape(comp.T, 1, M * (N - 1)) for comp in qh))
-    Q = _cumulative_qprod(q_row1, steps, N - 1, M)
-    quat = [ca.reshape(Q[k, :], M, N).T for k in range(4)]  # (N x M) per component
-    # Deformed edges: bottom edges of row 1 by R^{1j}, vertical edges by the panel on their
-    # right (the last column by the panel on its left); positions are cumulative sums.
+    return qv, qh
+
+
+def rotated_edges(quat, alpha, theta_h, lh, lv):
+    """Folded edge vectors: the bottom edges by their panel's rotation, the vertical edges by
+    the panel on their right (the last column by the panel on its left).
+
+    ``quat`` are the 4 components (N x M) of the panel rotations. Returns (bottom, vertical)
+    as 3 components each, 1 x M and N x M+1.
+    """
+    M = lh.shape[1]
+    theta_v = theta_h[:-1, :] + alpha[:-1, :]
     bottom = _rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
                             lh[0, :] * ca.sin(theta_h[0, :M]))
     quat_v = [ca.horzcat(comp, comp[:, M - 1]) for comp in quat]
-    vert = _rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
+    vertical = _rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
+    return bottom, vertical
+
+
+def _fold_expr(alpha, beta, sigma, lh, lv, omega):
+    N, M = lv.shape[0], lh.shape[1]
+    theta_h = edge_directions(alpha, beta)
+    qv, qh = crease_quaternions(alpha, beta, sigma, theta_h, omega)
+    # R^{1j} = R^{1(j-1)} R_{t2}(-gamma2^{1j}); R^{ij} = R^{(i-1)j} R_{t1}(gamma1^{ij}).
+    q_row1 = _cumulative_qprod(ca.DM([1, 0, 0, 0]), ca.vertcat(*qv), M - 1, 1)
+    steps = ca.vertcat(*(ca.reshape(comp.T, 1, M * (N - 1)) for comp in qh))
+    Q = _cumulative_qprod(q_row1, steps, N - 1, M)
+    quat = [ca.reshape(Q[k, :], M, N).T for k in range(4)]  # (N x M) per component
+    bottom, vertical = rotated_edges(quat, alpha, theta_h, lh, lv)
     out = []
-    for b, v in zip(bottom, vert):
+    for b, v in zip(bottom, vertical):
         row1 = ca.horzcat(0, ca.cumsum(b, 1))
         out.append(ca.vertcat(row1, ca.repmat(row1, N, 1) + ca.cumsum(v, 0)))
-    return tuple(out)
+    return tuple(out), quat
 
 
 # --------------------------------------------------------------------------- evaluation

@@ -7,8 +7,9 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
 * ``simultaneous``: every vertex angle and side is a variable and the marching equations are
   equality constraints, panel by panel (many variables, sparse Jacobians).
 
-Both share the residuals of the loss (:func:`loss_residuals`) and the inline constraints
-(:func:`pattern_constraints`), so they state the same problem.
+Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term and the
+inline constraints (angle bounds, multiplier margins, sides against the mean side), so they
+state the same problem.
 """
 
 from __future__ import annotations
@@ -18,9 +19,11 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from . import shape
+from . import numpy_model, shape
 from .boundary import BoundaryData
-from .marching import folded_function
+from .marching import (boundary_inputs, crease_quaternions, edge_directions, fold_function,
+                       folded_function, panel_cell, panel_quaternions_function, pattern_function,
+                       qmul, rotated_edges)
 
 PI = np.pi
 
@@ -37,11 +40,11 @@ class NLP:
     lbx: np.ndarray
     ubx: np.ndarray
     x0: np.ndarray
-    #: Functions of x: boundary data vector (angles, lengths), omega, quaternion, translation
+    #: Function of x: the boundary data vector (angles, lengths) and omega
     unpack: ca.Function
     #: Function of x: the folded vertices (Yx, Yy, Yz)
     folded: ca.Function
-    groups: dict[str, slice]
+    groups: dict
 
 
 def rotation_from_quaternion(q):
@@ -93,11 +96,61 @@ def loss_residuals(Y, rotation, translation, target: np.ndarray, weights: dict[s
     return ca.vertcat(*out)
 
 
-def sequential(bd0: BoundaryData, omega0: float, rigid0: tuple[np.ndarray, np.ndarray],
-               target: np.ndarray, weights: dict[str, float], spacing: float,
-               angle_bounds: tuple[float, float], omega_bounds: tuple[float, float],
-               fixed: tuple[str, ...], constraints) -> NLP:
-    """The sequential transcription: x = (boundary angles, boundary lengths, omega, q, t)."""
+@dataclass(frozen=True)
+class Setup:
+    """Everything a transcription needs, derived from a DesignProblem and its start."""
+
+    boundary: BoundaryData  # the Miura start
+    omega: float
+    rotation: np.ndarray  # rigid alignment of the start onto the target
+    translation: np.ndarray
+    target: np.ndarray  # (N+1, M+1, 3) target lattice
+    spacing: float
+    weights: dict
+    min_angle: float
+    min_length: float
+    mu_margin: float
+    omega_bounds: tuple[float, float]
+    fixed: tuple[str, ...]
+
+    @property
+    def mu_outside(self) -> np.ndarray:
+        """Per panel (column-major): does |mu_abc| start above 1? (held by the constraints)"""
+        mu0 = pattern_function(self.boundary.N, self.boundary.M).call(
+            [ca.DM(a) for a in boundary_inputs(self.boundary)])[5].full()
+        return np.abs(mu0.ravel(order="F")) > 1
+
+    def mu_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of sign * (mu^2 - 1) with sign = +1 above 1 and -1 below."""
+        out, m = self.mu_outside, self.mu_margin
+        return np.where(out, (1 + m) ** 2 - 1, 1 - (1 - m) ** 2), np.full(out.size, np.inf)
+
+    def rigid0(self) -> np.ndarray:
+        return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
+
+
+def _objective_residuals(setup: Setup, Y, rigid, boundary_vec, boundary_vec0) -> ca.MX:
+    """Loss, quaternion normalisation and the Tikhonov term towards the Miura start."""
+    q, t = rigid[:4], rigid[4:]
+    nl = setup.boundary.N + setup.boundary.M
+    scale = np.concatenate([np.ones(boundary_vec0.size - nl - 1), np.full(nl, 1 / setup.spacing),
+                            [1.0]])
+    return ca.vertcat(
+        loss_residuals(Y, rotation_from_quaternion(q), t, setup.target, setup.weights,
+                       setup.spacing),
+        ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
+        np.sqrt(setup.weights.get("regularization", 0) / scale.size)
+        * (boundary_vec - boundary_vec0) * scale)
+
+
+def sequential(setup: Setup) -> NLP:
+    """The sequential transcription: x = (boundary angles, boundary lengths, omega, q, t).
+
+    The pattern and the folded state are functions of x through the marching graph; the
+    inline constraints are every vertex angle in [min_angle, pi - min_angle], the multiplier
+    margin of every panel and every side >= min_length * mean side.
+    """
+    bd0 = setup.boundary
     N, M = bd0.N, bd0.M
     nv, nl = N + 1 + M, N + M
     x = ca.MX.sym("x", 2 * nv + nl + 1 + 7)
@@ -105,30 +158,148 @@ def sequential(bd0: BoundaryData, omega0: float, rigid0: tuple[np.ndarray, np.nd
               "omega": slice(2 * nv + nl, 2 * nv + nl + 1),
               "rigid": slice(2 * nv + nl + 1, 2 * nv + nl + 8)}
     sig = ca.DM(bd0.sigma).T
-    alpha, beta = x[:nv].T, x[nv:2 * nv].T
-    tri = ca.vertcat(alpha, beta, sig)
+    tri = ca.vertcat(x[:nv].T, x[nv:2 * nv].T, sig)
     lengths = x[groups["lengths"]].T
     omega = x[groups["omega"]]
-    q, t = x[groups["rigid"]][:4], x[groups["rigid"]][4:]
-    f = folded_function(N, M)
-    inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:], omega]
-    Y = f.call(inputs)
-    x0 = np.concatenate([bd0.to_vector(), [omega0], quaternion_from_rotation(rigid0[0]),
-                         rigid0[1]])
-    scale = np.concatenate([np.ones(2 * nv), np.full(nl, 1 / spacing), [1.0]])
-    res = ca.vertcat(
-        loss_residuals(Y, rotation_from_quaternion(q), t, target, weights, spacing),
-        ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
-        np.sqrt(weights.get("regularization", 0) / scale.size)
-        * (x[:2 * nv + nl + 1] - x0[:2 * nv + nl + 1]) * scale)
-    g, lbg, ubg = constraints(inputs[:4])
-    lbx = np.concatenate([np.full(2 * nv, angle_bounds[0]), np.full(nl, 1e-9 * spacing),
-                          [omega_bounds[0]], np.full(7, -np.inf)])
-    ubx = np.concatenate([np.full(2 * nv, angle_bounds[1]), np.full(nl, np.inf),
-                          [omega_bounds[1]], np.full(7, np.inf)])
-    for name in fixed:
+    inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
+    Y = folded_function(N, M).call([*inputs, omega])
+    x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()])
+    design = slice(0, 2 * nv + nl + 1)
+    res = _objective_residuals(setup, Y, x[groups["rigid"]], x[design], x0[design])
+    # Inline constraints on the marched pattern.
+    alpha, beta, _, lh, lv, mu = pattern_function(N, M).call(inputs)[:6]
+    sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
+    angles = ca.vertcat(ca.vec(alpha), ca.vec(beta))
+    sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
+    g = ca.vertcat(angles, sign * (ca.vec(mu) ** 2 - 1),
+                   sides / (ca.sum1(sides) / sides.numel()) - setup.min_length)
+    lo_mu, hi_mu = setup.mu_bounds()
+    lbg = np.concatenate([np.full(angles.numel(), setup.min_angle), lo_mu,
+                          np.zeros(sides.numel())])
+    ubg = np.concatenate([np.full(angles.numel(), PI - setup.min_angle), hi_mu,
+                          np.full(sides.numel(), np.inf)])
+    lbx = np.concatenate([np.full(2 * nv, setup.min_angle), np.full(nl, 1e-9 * setup.spacing),
+                          [setup.omega_bounds[0]], np.full(7, -np.inf)])
+    ubx = np.concatenate([np.full(2 * nv, PI - setup.min_angle), np.full(nl, np.inf),
+                          [setup.omega_bounds[1]], np.full(7, np.inf)])
+    for name in setup.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
-    unpack = ca.Function("unpack", [x], [x[:2 * nv + nl], omega, q, t])
+    unpack = ca.Function("unpack", [x], [x[:2 * nv + nl], omega])
     folded = ca.Function("folded", [x], list(Y))
+    return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
+               unpack=unpack, folded=folded, groups=groups)
+
+
+class _Layout:
+    """Named blocks of one flat variable vector, each reshaped to a matrix."""
+
+    def __init__(self, shapes: dict[str, tuple[int, int]]):
+        self.slices, self.shapes, k = {}, shapes, 0
+        for name, (r, c) in shapes.items():
+            self.slices[name] = slice(k, k + r * c)
+            k += r * c
+        self.size = k
+
+    def views(self, x) -> dict:
+        return {n: ca.reshape(x[self.slices[n]], *self.shapes[n]) for n in self.shapes}
+
+    def pack(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        out = np.zeros(self.size)
+        for n, v in values.items():
+            out[self.slices[n]] = np.asarray(v, dtype=float).reshape(self.shapes[n]).ravel("F")
+        return out
+
+    def index(self, name: str, rows, cols) -> np.ndarray:
+        """Flat indices of block ``name`` at [rows, cols] (column-major storage)."""
+        r, c = self.shapes[name]
+        grid = np.arange(r * c).reshape((r, c), order="F")
+        return self.slices[name].start + np.atleast_1d(grid[rows, cols]).ravel()
+
+
+def simultaneous(setup: Setup) -> NLP:
+    """The simultaneous transcription: every vertex angle, side, edge direction, panel
+    rotation (quaternion) and folded vertex is a variable, and the marching equations are
+    equality constraints, panel by panel. The Jacobians stay sparse, so large patterns fit.
+
+    Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
+    d, l_cd, l_bd. Kinematics: edge directions accumulate sector angles, panel quaternions
+    multiply by crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc).
+    """
+    bd0 = setup.boundary
+    N, M = bd0.N, bd0.M
+    n1, m1 = N + 1, M + 1
+    lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
+                   "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
+                   "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "omega": (1, 1),
+                   "mean": (1, 1), "rigid": (7, 1)})
+    x = ca.MX.sym("x", lay.size)
+    v = lay.views(x)
+    A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
+    start = numpy_model.march(bd0)
+    S = ca.DM(start.sigma)
+    # Pattern: one panel cell per panel, mapped.
+    cell = panel_cell().map(N * M)
+    row = lambda m: ca.vec(m).T  # noqa: E731 - column-major row of a panel-shaped block
+    xs, ys = cell(ca.vertcat(row(A[1:, :M]), row(B[1:, :M]), row(S[1:, :M]), row(LV[:, :M])),
+                  ca.vertcat(row(A[:N, :M]), row(B[:N, :M]), row(S[:N, :M]),
+                             row(A[:N, 1:]), row(B[:N, 1:]), row(S[:N, 1:]), row(LH[:N, :])))
+    march_res = ca.vec(ca.vertcat(row(A[1:, 1:]) - xs[0, :], row(B[1:, 1:]) - xs[1, :],
+                                  row(LV[:, 1:]) - xs[3, :], row(LH[1:, :]) - ys[0, :]))
+    mu = ys[1, :].T
+    # Kinematics, lifted.
+    th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
+                        ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
+    quat = [v["Qw"], v["Qx"], v["Qy"], v["Qz"]]
+    qv, qh = crease_quaternions(A, B, S, TH, omega)
+    prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
+    prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
+    q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
+                       *(ca.vec(c[1:, :] - p) for c, p in zip(quat, prod_rows)))
+    Y = [v["Yx"], v["Yy"], v["Yz"]]
+    bottom, vertical = rotated_edges(quat, A, TH, LH, LV)
+    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :M] - b) for c, b in zip(Y, bottom)),
+                       *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
+    # Boundary design vector in BoundaryData.to_vector order.
+    bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
+    bvec0 = np.concatenate([bd0.to_vector(), [setup.omega]])
+    res = _objective_residuals(setup, Y, v["rigid"], bvec, bvec0)
+    sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
+    sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
+    n_eq = march_res.numel() + th_res.numel() + q_res.numel() + y_res.numel() + 1
+    g = ca.vertcat(march_res, th_res, q_res, y_res, ca.sum1(sides) - sides.numel() * v["mean"],
+                   sign * (mu ** 2 - 1), sides - setup.min_length * v["mean"])
+    lo_mu, hi_mu = setup.mu_bounds()
+    lbg = np.concatenate([np.zeros(n_eq), lo_mu, np.zeros(sides.numel())])
+    ubg = np.concatenate([np.zeros(n_eq), hi_mu, np.full(sides.numel(), np.inf)])
+    # Start: the Miura pattern, its directions, panel rotations and folded state.
+    args = [start.alpha, start.beta, start.sigma, start.lh, start.lv, setup.omega]
+    quat0 = [c.full() for c in panel_quaternions_function(N, M)(*args)]
+    Y0 = [c.full() for c in fold_function(N, M)(*args)]
+    a_sym, b_sym = ca.MX.sym("a", n1, m1), ca.MX.sym("b", n1, m1)
+    theta0 = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])(
+        start.alpha, start.beta)
+    x0 = lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
+                   "TH": theta0.full(), "Qw": quat0[0], "Qx": quat0[1], "Qy": quat0[2],
+                   "Qz": quat0[3], "Yx": Y0[0], "Yy": Y0[1], "Yz": Y0[2],
+                   "omega": setup.omega, "mean": start.side_lengths.mean(),
+                   "rigid": setup.rigid0()})
+    lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
+    for name in ("A", "B"):
+        lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
+    for name in ("LH", "LV"):
+        lbx[lay.slices[name]] = 1e-9 * setup.spacing
+    lbx[lay.slices["omega"]], ubx[lay.slices["omega"]] = setup.omega_bounds
+    for name in ("TH", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):  # R^{11} = I, y^{11} = 0
+        lbx[lay.index(name, 0, 0)] = ubx[lay.index(name, 0, 0)] = 0.0
+    lbx[lay.index("Qw", 0, 0)] = ubx[lay.index("Qw", 0, 0)] = 1.0
+    groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
+                                       + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
+              "lengths": np.concatenate([lay.index("LV", slice(None), 0),
+                                         lay.index("LH", 0, slice(None))]),
+              "omega": lay.index("omega", 0, 0)}
+    for name in setup.fixed:
+        lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
+    unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
+    folded = ca.Function("folded", [x], Y)
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=unpack, folded=folded, groups=groups)

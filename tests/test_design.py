@@ -120,3 +120,27 @@ def test_progress_callback_receives_every_iteration():
         small("sphere_cap", max_iter=3, tol=1e-12).solve(callback=seen.append)
     assert [s["iter"] for s in seen] == list(range(len(seen))) and len(seen) >= 3
     assert all(np.isfinite(s["objective"]) and s["inf_pr"] >= 0 for s in seen)
+
+
+def test_transcriptions_state_the_same_problem_at_the_start():
+    prob = small("quarter_vase")
+    seq = prob.transcribe()
+    sim = replace(prob, transcription="simultaneous").transcribe()
+
+    def evaluate(nlp):
+        F = ca.Function("F", [nlp.x], [nlp.residuals, nlp.g, *nlp.folded.call([nlp.x])])
+        res, g, *Y = (np.array(v.full()) for v in F(nlp.x0))
+        return res.ravel(), g.ravel(), np.stack(Y, -1)
+
+    r1, g1, Y1 = evaluate(seq)
+    r2, g2, Y2 = evaluate(sim)
+    np.testing.assert_allclose(r2, r1, atol=1e-12)
+    np.testing.assert_allclose(Y2, Y1, atol=1e-12)
+    # The simultaneous start satisfies its marching equations, so it is a feasible point.
+    assert np.all(g2 >= sim.lbg - 1e-10) and np.all(g2 <= sim.ubg + 1e-10)
+    assert np.all(g1 >= seq.lbg - 1e-10) and np.all(g1 <= seq.ubg + 1e-10)
+    # Fixing a group pins the same boundary data in both.
+    fixed = replace(prob, transcription="simultaneous", fix=("lengths",)).transcribe()
+    idx = fixed.groups["lengths"]
+    np.testing.assert_array_equal(fixed.lbx[idx], fixed.ubx[idx])
+    np.testing.assert_allclose(fixed.x0[idx], prob.start().boundary.lengths)
