@@ -17,7 +17,7 @@ from .results import DesignResult
 
 __version__ = "0.1.0"
 
-_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "surfaces", "shape", "design",
+_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces", "shape", "design",
                "results", "io", "viz", "cli")
 
 

@@ -1,0 +1,181 @@
+"""Side lengths by IPOPT over the LP's feasible set (rffqm_nlp.side_lengths, Fig. Random)."""
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+import rffqm_nlp as rq
+from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
+from rffqm_nlp.lengths import length_spread, side_length_lp
+from rffqm_nlp.marching import march, pattern_function
+from rffqm_nlp.side_lengths import side_length_nlp, solve_side_lengths
+
+SEEDS = (0, 1, 2)
+OBJECTIVES = ("max_min", "uniform")
+
+
+def fig_random(seed, n=10):
+    """The paper's Fig. Random input: Miura boundary angles perturbed by U(+-0.05 pi)."""
+    return rq.perturb_angles(rq.miura_boundary(n, n), 0.05 * np.pi, seed)
+
+
+def sides_matrix_by_marching(bd):
+    """Column k: all sides (lh then lv) marched from ell = e_k with the unchecked CasADi graph.
+
+    Independent of rffqm_nlp.lengths.length_maps' coefficient recursion.
+    """
+    N, M = bd.N, bd.M
+    f = pattern_function(N, M)
+    cols = []
+    for k in range(N + M):
+        e = np.zeros(N + M)
+        e[k] = 1.0
+        out = f.call([bd.left.T, bd.bottom.T, e[None, :N], e[None, N:]])
+        cols.append(np.concatenate([np.array(out[3].full()).ravel(),
+                                    np.array(out[4].full()).ravel()]))
+    return np.column_stack(cols)
+
+
+def linprog_max_min(A):
+    """max t s.t. A ell >= t, mean(A ell) = 1, solved by HiGHS."""
+    K, n = A.shape
+    c = np.zeros(n + 1)
+    c[-1] = -1.0
+    res = linprog(c, A_ub=np.hstack([-A, np.ones((K, 1))]), b_ub=np.zeros(K),
+                  A_eq=np.append(A.mean(axis=0), 0.0)[None, :], b_eq=[1.0],
+                  bounds=[(None, None)] * (n + 1), method="highs")
+    assert res.status == 0, res.message
+    return -res.fun
+
+
+def log_variance(sides):
+    return float(np.var(np.log(sides)))
+
+
+@pytest.fixture(scope="module")
+def solved():
+    """{seed: {"lp" | "max_min" | "uniform": Pattern}} on the Fig. Random inputs."""
+    out = {}
+    for seed in SEEDS:
+        bd = fig_random(seed)
+        out[seed] = {"bd": bd, "lp": march(side_length_lp(bd))}
+        for obj in OBJECTIVES:
+            out[seed][obj] = march(side_length_nlp(bd, obj))
+    return out
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_patterns_march_with_positive_sides(solved, seed, objective):
+    pat = solved[seed][objective]
+    bd = solved[seed]["bd"]
+    sides = pat.side_lengths
+    assert np.all(sides > 0)
+    assert sides.mean() == pytest.approx(1.0, abs=1e-9)
+    # the angles are those of the input: only the lengths changed
+    np.testing.assert_array_equal(pat.boundary.left, bd.left)
+    np.testing.assert_array_equal(pat.boundary.bottom, bd.bottom)
+    np.testing.assert_allclose(pat.alpha, solved[seed]["lp"].alpha, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_max_min_beats_lp_and_uniform(solved, seed):
+    spread = {k: length_spread(solved[seed][k].lh, solved[seed][k].lv)["min_over_mean"]
+              for k in ("lp", *OBJECTIVES)}
+    assert spread["max_min"] >= spread["lp"] - 1e-9
+    assert spread["max_min"] >= spread["uniform"] - 1e-9
+
+
+def test_lp_drives_some_side_near_zero(solved):
+    """The paper's complaint: the LP's smallest side is far below the max-min optimum."""
+    ratios = [length_spread(solved[s]["lp"].lh, solved[s]["lp"].lv)["min_over_mean"]
+              / length_spread(solved[s]["max_min"].lh, solved[s]["max_min"].lv)["min_over_mean"]
+              for s in SEEDS]
+    assert min(ratios) < 0.05
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_uniform_lowers_log_variance(solved, seed):
+    lv = {k: log_variance(solved[seed][k].side_lengths) for k in ("lp", *OBJECTIVES)}
+    assert lv["uniform"] <= lv["max_min"] + 1e-9
+    assert lv["uniform"] <= lv["lp"] + 1e-9
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_max_min_certified_by_linprog(solved, seed):
+    bd = solved[seed]["bd"]
+    t_lp = linprog_max_min(sides_matrix_by_marching(bd))
+    sol = solve_side_lengths(bd, "max_min")
+    assert sol.objective == pytest.approx(t_lp, abs=1e-6)
+    sides = solved[seed]["max_min"].side_lengths
+    assert sides.min() / sides.mean() == pytest.approx(t_lp, abs=1e-6)
+    np.testing.assert_allclose(sol.sides, sides, atol=1e-9)
+
+
+@pytest.mark.parametrize("layout", ["zigzag_j", "zigzag_i"])
+@pytest.mark.parametrize("a, b", [(1.0, 1.0), (1.0, 2.5)])
+def test_uniform_on_miura_gives_equal_sides(layout, a, b):
+    bd = rq.miura_boundary(6, 8, a=a, b=b, layout=layout)
+    pat = march(side_length_nlp(bd, "uniform"))
+    np.testing.assert_allclose(pat.side_lengths, 1.0, atol=1e-8)
+    # with a = b the input lengths themselves were already optimal (up to scale)
+    if a == b:
+        np.testing.assert_allclose(march(bd).side_lengths, pat.side_lengths, atol=1e-8)
+
+
+def test_max_min_on_miura_is_one():
+    sol = solve_side_lengths(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
+    assert sol.objective == pytest.approx(1.0, abs=1e-8)
+
+
+@pytest.fixture(scope="module")
+def infeasible():
+    """20 x 20 Fig. Random angles whose LP (eq:linearP) is infeasible."""
+    bd = fig_random(0, n=20)
+    with pytest.raises(InfeasibleDesign):
+        side_length_lp(bd)
+    return bd
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_infeasible_angles_raise(infeasible, objective):
+    with pytest.raises(InfeasibleDesign, match="no positive side lengths"):
+        side_length_nlp(infeasible, objective)
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_min_length_above_optimum_raises(solved, objective):
+    bd = solved[0]["bd"]
+    t = length_spread(solved[0]["max_min"].lh, solved[0]["max_min"].lv)["min_over_mean"]
+    with pytest.raises(InfeasibleDesign, match="min_length"):
+        side_length_nlp(bd, objective, min_length=min(0.99, t + 0.05))
+
+
+def test_min_length_is_respected(solved):
+    bd = solved[1]["bd"]
+    t = length_spread(solved[1]["max_min"].lh, solved[1]["max_min"].lv)["min_over_mean"]
+    floor = 0.9 * t
+    pat = march(side_length_nlp(bd, "uniform", min_length=floor))
+    assert pat.side_lengths.min() >= floor * (1 - 1e-6)
+
+
+def test_solver_failure_carries_ipopt_status(solved):
+    with pytest.raises(SolverFailed) as info:
+        side_length_nlp(solved[0]["bd"], "uniform", max_iter=1)
+    assert info.value.status == "Maximum_Iterations_Exceeded"
+    assert "Maximum_Iterations_Exceeded" in str(info.value)
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"objective": "min_max"}, {"objective": None}, {"min_length": 0.0}, {"min_length": 1.0},
+    {"min_length": -0.1}, {"min_length": float("nan")}, {"min_length": "0.1"},
+    {"min_length": True}, {"tol": 0.0}, {"tol": "small"}, {"max_iter": 0}, {"max_iter": 2.5},
+    {"max_iter": "many"}])
+def test_invalid_arguments(kwargs):
+    with pytest.raises(InputError):
+        side_length_nlp(rq.miura_boundary(2, 2), **kwargs)
+
+
+def test_rejects_non_boundary_data():
+    with pytest.raises(InputError, match="BoundaryData"):
+        side_length_nlp({"left": [[1.0, 1.0, -1.0]]})
