@@ -17,8 +17,8 @@ from .results import DesignResult
 
 __version__ = "0.1.0"
 
-_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces", "shape", "design",
-               "results", "io", "viz", "cli")
+_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
+               "shape", "design", "transcription", "results", "io", "viz", "cli")
 
 
 def __getattr__(name: str):
