@@ -343,7 +343,7 @@ def fold(pat: Pattern, omega) -> np.ndarray:
     if om.ndim == 0:
         return np.stack([o.full() for o in f.call([*args, float(om)])], axis=-1)
     K = om.size
-    fk = f.map(K)
+    fk = f.map("fold_k", "serial", K, [0, 1, 2, 3, 4], [])  # the pattern is shared, not copied
     outs = fk.call([*args, om[None, :]])
     n1 = pat.N + 1
     return np.stack([o.full().reshape(n1, K, pat.M + 1).transpose(1, 0, 2) for o in outs],
