@@ -71,7 +71,10 @@ class DesignProblem:
       data) or "simultaneous" (all pattern and kinematic quantities as variables, the marching
       equations as sparse equality constraints); ``hessian``: "gauss-newton" (J^T J of the residuals),
       "exact" or "limited-memory" (L-BFGS);
-    * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits.
+    * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
+    * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
+      the target lattice (a fraction of the target's diameter) with every constraint holding
+      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance.
     """
 
     target: surfaces.Surface
@@ -91,6 +94,7 @@ class DesignProblem:
     max_iter: int = 1000
     tol: float = 1e-6
     time_limit: float | None = None
+    stop_rms: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
@@ -127,6 +131,9 @@ class DesignProblem:
         if not -PI <= lo < hi <= PI or not lo <= self.omega0 <= hi:
             raise InputError(f"need -pi <= omega_bounds[0] <= omega0 <= omega_bounds[1] <= pi, "
                              f"got omega0 = {self.omega0}, omega_bounds = {self.omega_bounds}")
+        if self.stop_rms is not None and not self.stop_rms > 0:
+            raise InputError(f"stop_rms must be a positive fraction of the diameter or None, "
+                             f"got {self.stop_rms}")
         if self.max_iter < 1 or not self.tol > 0:
             raise InputError("max_iter must be >= 1 and tol > 0")
 
@@ -199,10 +206,12 @@ class DesignProblem:
                 x = nlp.x0
             elif x.shape != nlp.x0.shape:
                 raise InputError("warm_start comes from a problem of another size")
-            solver = self._solver(nlp, history, callback, verbose)
+            solver, log = self._solver(nlp, start, history, callback, verbose)
             t_build += time.perf_counter() - t1
             sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
-            stats = solver.stats()
+            stats = dict(solver.stats())
+            if log.reached:
+                stats.update(success=True, return_status="Fit_Reached")
             x = sol["x"].full().ravel()
             iterations += int(stats["iter_count"])
             solve_stats = {"status": stats["return_status"], "success": bool(stats["success"]),
@@ -224,7 +233,8 @@ class DesignProblem:
                 status=stats["return_status"], stats=solve_stats, last_iterate=x)
         return self._result(nlp, start, x, solve_stats)
 
-    def _solver(self, nlp: transcription.NLP, history: dict, callback, verbose: bool):
+    def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
+                verbose: bool):
         f = 0.5 * ca.sumsqr(nlp.residuals)
         opts: dict[str, Any] = {
             "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
@@ -242,11 +252,19 @@ class DesignProblem:
             opts["hess_lag"] = ca.Function(
                 "nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
                 ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
-        log = _IterationLog(nlp, history, callback)
+        stop = None
+        if self.stop_rms is not None:
+            limit = self.stop_rms * self.target.diameter()
+
+            def stop(x: np.ndarray) -> bool:
+                Y = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
+                return shape.kabsch(Y[::2, ::2], start.target_points)[2] <= limit
+
+        log = _IterationLog(nlp, history, callback, stop)
         opts["iteration_callback"] = log
         solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
-        return solver
+        return solver, log
 
     def _result(self, nlp: transcription.NLP, start: Start, x: np.ndarray,
                 stats: dict) -> DesignResult:
@@ -361,10 +379,17 @@ def _violation_report(nlp: transcription.NLP, sol) -> str:
 
 
 class _IterationLog(ca.Callback):
-    """IPOPT iteration callback: records objective and constraint violation per iteration."""
+    """IPOPT iteration callback: records objective and constraint violation per iteration,
+    and asks IPOPT to stop once ``stop(x)`` holds at an iterate that satisfies the constraints.
+    """
 
-    def __init__(self, nlp: transcription.NLP, history: dict, callback):
+    #: constraint violation below which an iterate counts as feasible for ``stop``
+    FEASIBLE = 1e-9
+
+    def __init__(self, nlp: transcription.NLP, history: dict, callback, stop=None):
         ca.Callback.__init__(self)
+        self._stop = stop
+        self.reached = False
         self._nx, self._ng = nlp.x.numel(), nlp.g.numel()
         self._lbg, self._ubg = nlp.lbg, nlp.ubg
         self._history = history
@@ -404,4 +429,7 @@ class _IterationLog(ca.Callback):
             self._history[key].append(value)
         if self._callback is not None:
             self._callback(entry)
-        return [0]
+        if self._stop is not None and viol <= self.FEASIBLE:
+            x = np.asarray(arg[ca.nlpsol_out().index("x")]).ravel()
+            self.reached = bool(self._stop(x))
+        return [int(self.reached)]

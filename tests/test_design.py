@@ -15,7 +15,8 @@ TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
 
 
 def small(name: str, **kw) -> DesignProblem:
-    return replace(DesignProblem.load(f"targets/{name}.toml"), **{"panels": (8, 8), **kw})
+    return replace(DesignProblem.load(f"targets/{name}.toml"),
+                   **{"panels": (8, 8), "stop_rms": None, **kw})
 
 
 @pytest.fixture(scope="module", params=TARGETS)
@@ -144,3 +145,13 @@ def test_transcriptions_state_the_same_problem_at_the_start():
     idx = fixed.groups["lengths"]
     np.testing.assert_array_equal(fixed.lbx[idx], fixed.ubx[idx])
     np.testing.assert_allclose(fixed.x0[idx], prob.start().boundary.lengths)
+
+
+def test_stop_rms_stops_early_at_a_feasible_fit():
+    prob = small("sphere_cap")
+    full = prob.solve()
+    early = replace(prob, stop_rms=0.012).solve()
+    assert early.stats["status"] == "Fit_Reached"
+    assert early.fit["rms"] <= 0.012 + 1e-12
+    assert early.stats["iterations"] < full.stats["iterations"]
+    assert early.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
