@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import importlib
 
+__version__ = "0.1.0"  # set before the imports below, which read it (io)
+
 from .boundary import BoundaryData, miura_boundary, perturb_angles
 from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
                      RffqmError, SolverFailed, SurfaceError)
@@ -14,8 +16,6 @@ from .pattern import Pattern
 from .marching import fold, march
 from .design import DesignProblem
 from .results import DesignResult
-
-__version__ = "0.1.0"
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
                "shape", "design", "transcription", "results", "io", "viz", "cli")

@@ -33,6 +33,7 @@ from typer.core import TyperCommand
 
 from .boundary import LAYOUTS, miura_boundary, perturb_angles
 from .errors import InputError, RffqmError
+from .io import DIR_MODE, FILE_MODE, atomic_path
 
 if TYPE_CHECKING:
     from .design import DesignProblem
@@ -119,25 +120,8 @@ def check_out_dir(out: Path, force: bool) -> None:
 
 def write_atomic(path: Path, data: bytes) -> None:
     """Write ``data`` to a temporary file beside ``path``, then rename it into place."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, _FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_FILE_MODE = 0o666 & ~_umask()
-_DIR_MODE = 0o777 & ~_umask()
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 @contextmanager
@@ -154,8 +138,8 @@ def staged_dir(out: Path) -> Iterator[Path]:
     try:
         yield tmp
         for path in tmp.rglob("*"):
-            os.chmod(path, _DIR_MODE if path.is_dir() else _FILE_MODE)
-        os.chmod(tmp, _DIR_MODE)
+            os.chmod(path, DIR_MODE if path.is_dir() else FILE_MODE)
+        os.chmod(tmp, DIR_MODE)
         if not out.exists():
             os.rename(tmp, out)
             return

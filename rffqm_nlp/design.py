@@ -252,19 +252,23 @@ class DesignProblem:
             opts["hess_lag"] = ca.Function(
                 "nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
                 ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
-        stop = None
-        if self.stop_rms is not None:
-            limit = self.stop_rms * self.target.diameter()
-
-            def stop(x: np.ndarray) -> bool:
-                Y = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
-                return shape.kabsch(Y[::2, ::2], start.target_points)[2] <= limit
-
-        log = _IterationLog(nlp, history, callback, stop)
+        log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start))
         opts["iteration_callback"] = log
         solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
         return solver, log
+
+    def _fit_reached(self, nlp: transcription.NLP, start: Start):
+        """For ``stop_rms``: does the aligned coarse lattice at x fit the target well enough?"""
+        if self.stop_rms is None:
+            return None
+        limit = self.stop_rms * self.target.diameter()
+
+        def reached(x: np.ndarray) -> bool:
+            Y = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
+            return shape.kabsch(Y[::2, ::2], start.target_points)[2] <= limit
+
+        return reached
 
     def _result(self, nlp: transcription.NLP, start: Start, x: np.ndarray,
                 stats: dict) -> DesignResult:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ import numpy as np
 
 from .boundary import BoundaryData
 from .errors import InputError
+from .io import atomic_path
 from .pattern import Pattern
 
 FORMAT = "rffqm-nlp design result"
@@ -85,14 +85,8 @@ class DesignResult:
         """Write ``result.json`` into ``directory`` (created if needed), atomically."""
         path = Path(directory) / FILENAME
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{FILENAME}.")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                json.dump(self.to_dict(), fh)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_dict()))
         return path
 
     @classmethod
