@@ -74,7 +74,9 @@ class DesignProblem:
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
     * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
       the target lattice (a fraction of the target's diameter) with every constraint holding
-      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance.
+      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance;
+    * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
+      None: IPOPT's 0.1 from a cold start, 1e-6 from a warm start).
     """
 
     target: surfaces.Surface
@@ -95,6 +97,7 @@ class DesignProblem:
     tol: float = 1e-6
     time_limit: float | None = None
     stop_rms: float | None = None
+    barrier_init: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
@@ -134,6 +137,8 @@ class DesignProblem:
         if self.stop_rms is not None and not self.stop_rms > 0:
             raise InputError(f"stop_rms must be a positive fraction of the diameter or None, "
                              f"got {self.stop_rms}")
+        if self.barrier_init is not None and not self.barrier_init > 0:
+            raise InputError(f"barrier_init must be positive or None, got {self.barrier_init}")
         if self.max_iter < 1 or not self.tol > 0:
             raise InputError("max_iter must be >= 1 and tol > 0")
 
@@ -168,16 +173,30 @@ class DesignProblem:
         return Start(boundary=bd, omega=self.omega0, target_points=target_points,
                      spacing=0.5 * (t_i + t_j), rotation=R, translation=t)
 
-    def transcribe(self, start: Start | None = None,
-                   weights: dict[str, float] | None = None) -> transcription.NLP:
-        """The NLP of this problem in the chosen transcription (``weights`` override)."""
+    def transcribe(self, start: Start | None = None, weights: dict[str, float] | None = None,
+                   initial: DesignResult | None = None) -> transcription.NLP:
+        """The NLP of this problem in the chosen transcription.
+
+        ``weights`` override the problem's; ``initial`` (a result of a problem of the same
+        size, in either transcription) replaces the Miura as the initial guess, while the
+        Miura stays the Tikhonov reference and fixes the mountain-valley pattern.
+        """
         start = start or self.start()
+        guess = start
+        if initial is not None:
+            if initial.boundary.N != 2 * self.N or initial.boundary.M != 2 * self.M:
+                raise InputError(f"the initial guess has {initial.boundary.N} x "
+                                 f"{initial.boundary.M} panels, the problem {self.panels}")
+            guess = Start(boundary=initial.boundary, omega=initial.omega,
+                          target_points=start.target_points, spacing=start.spacing,
+                          rotation=initial.rotation, translation=initial.translation)
         setup = transcription.Setup(
-            boundary=start.boundary, omega=start.omega, rotation=start.rotation,
-            translation=start.translation, target=start.target_points, spacing=start.spacing,
+            boundary=guess.boundary, omega=guess.omega, rotation=guess.rotation,
+            translation=guess.translation, target=start.target_points, spacing=start.spacing,
             weights=weights or self.weights, min_angle=self.min_angle,
             min_length=self.min_length, mu_margin=self.mu_margin,
-            omega_bounds=self.omega_bounds, fixed=self.fix)
+            omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
+            reference_omega=start.omega)
         return getattr(transcription, self.transcription)(setup)
 
     # ------------------------------------------------------------------ solve
@@ -186,6 +205,8 @@ class DesignProblem:
         """Solve the design with IPOPT; see the module docstring.
 
         ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration.
+        ``warm_start``: a result of a problem of the same size to start from instead of the
+        Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern).
         Raises :class:`InfeasibleDesign` when IPOPT finds the constraints infeasible,
         :class:`SolverFailed` (with IPOPT's status and the last iterate) otherwise.
         """
@@ -195,18 +216,17 @@ class DesignProblem:
                 "which only equal sides satisfy; choose min_length < 1 (default 0.2)")
         t0 = time.perf_counter()
         start = self.start()
-        x = None if warm_start is None else np.asarray(warm_start.x, dtype=float)
+        x = None
         history: dict[str, list] = {"iter": [], "objective": [], "inf_pr": [], "elapsed": []}
         iterations, t_build = 0, 0.0
-        for factor in self.continuation:
+        for stage, factor in enumerate(self.continuation):
             weights = dict(self.weights, regularization=factor * self.weights["regularization"])
             t1 = time.perf_counter()
-            nlp = self.transcribe(start, weights)
+            nlp = self.transcribe(start, weights, warm_start if x is None else None)
             if x is None:
                 x = nlp.x0
-            elif x.shape != nlp.x0.shape:
-                raise InputError("warm_start comes from a problem of another size")
-            solver, log = self._solver(nlp, start, history, callback, verbose)
+            solver, log = self._solver(nlp, start, history, callback, verbose,
+                                       warm=warm_start is not None or stage > 0)
             t_build += time.perf_counter() - t1
             sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
             stats = dict(solver.stats())
@@ -234,7 +254,7 @@ class DesignProblem:
         return self._result(nlp, start, x, solve_stats)
 
     def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
-                verbose: bool):
+                verbose: bool, warm: bool = False):
         f = 0.5 * ca.sumsqr(nlp.residuals)
         opts: dict[str, Any] = {
             "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
@@ -242,6 +262,11 @@ class DesignProblem:
             "print_time": verbose, "ipopt.sb": "yes", "expand": True}
         if self.time_limit is not None:
             opts["ipopt.max_wall_time"] = float(self.time_limit)
+        if warm or self.barrier_init is not None:
+            # near an optimum a small barrier keeps IPOPT from wandering off
+            mu_init = 1e-6 if self.barrier_init is None else self.barrier_init
+            opts.update({"ipopt.mu_init": mu_init, "ipopt.bound_push": 1e-9,
+                         "ipopt.bound_frac": 1e-9})
         if self.hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         elif self.hessian == "gauss-newton":

@@ -100,7 +100,7 @@ def loss_residuals(Y, rotation, translation, target: np.ndarray, weights: dict[s
 class Setup:
     """Everything a transcription needs, derived from a DesignProblem and its start."""
 
-    boundary: BoundaryData  # the Miura start
+    boundary: BoundaryData  # the initial guess (the Miura start, or a warm start)
     omega: float
     rotation: np.ndarray  # rigid alignment of the start onto the target
     translation: np.ndarray
@@ -112,12 +112,19 @@ class Setup:
     mu_margin: float
     omega_bounds: tuple[float, float]
     fixed: tuple[str, ...]
+    reference: BoundaryData  # the Miura start: Tikhonov reference and MV pattern
+    reference_omega: float
+
+    @property
+    def reference_vector(self) -> np.ndarray:
+        """The Tikhonov reference: boundary data vector and omega of the Miura start."""
+        return np.concatenate([self.reference.to_vector(), [self.reference_omega]])
 
     @property
     def mu_outside(self) -> np.ndarray:
-        """Per panel (column-major): does |mu_abc| start above 1? (held by the constraints)"""
-        mu0 = pattern_function(self.boundary.N, self.boundary.M).call(
-            [ca.DM(a) for a in boundary_inputs(self.boundary)])[5].full()
+        """Per panel (column-major): is |mu_abc| above 1 at the Miura start? (held)"""
+        mu0 = pattern_function(self.reference.N, self.reference.M).call(
+            [ca.DM(a) for a in boundary_inputs(self.reference)])[5].full()
         return np.abs(mu0.ravel(order="F")) > 1
 
     def mu_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -129,18 +136,18 @@ class Setup:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
 
-def _objective_residuals(setup: Setup, Y, rigid, boundary_vec, boundary_vec0) -> ca.MX:
+def _objective_residuals(setup: Setup, Y, rigid, boundary_vec) -> ca.MX:
     """Loss, quaternion normalisation and the Tikhonov term towards the Miura start."""
     q, t = rigid[:4], rigid[4:]
-    nl = setup.boundary.N + setup.boundary.M
-    scale = np.concatenate([np.ones(boundary_vec0.size - nl - 1), np.full(nl, 1 / setup.spacing),
-                            [1.0]])
+    ref = setup.reference_vector
+    nl = setup.reference.N + setup.reference.M
+    scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
     return ca.vertcat(
         loss_residuals(Y, rotation_from_quaternion(q), t, setup.target, setup.weights,
                        setup.spacing),
         ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
         np.sqrt(setup.weights.get("regularization", 0) / scale.size)
-        * (boundary_vec - boundary_vec0) * scale)
+        * (boundary_vec - ref) * scale)
 
 
 def sequential(setup: Setup) -> NLP:
@@ -164,8 +171,7 @@ def sequential(setup: Setup) -> NLP:
     inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
     Y = folded_function(N, M).call([*inputs, omega])
     x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()])
-    design = slice(0, 2 * nv + nl + 1)
-    res = _objective_residuals(setup, Y, x[groups["rigid"]], x[design], x0[design])
+    res = _objective_residuals(setup, Y, x[groups["rigid"]], x[:2 * nv + nl + 1])
     # Inline constraints on the marched pattern.
     alpha, beta, _, lh, lv, mu = pattern_function(N, M).call(inputs)[:6]
     sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
@@ -261,8 +267,7 @@ def simultaneous(setup: Setup) -> NLP:
                        *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
     # Boundary design vector in BoundaryData.to_vector order.
     bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
-    bvec0 = np.concatenate([bd0.to_vector(), [setup.omega]])
-    res = _objective_residuals(setup, Y, v["rigid"], bvec, bvec0)
+    res = _objective_residuals(setup, Y, v["rigid"], bvec)
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
     n_eq = march_res.numel() + th_res.numel() + q_res.numel() + y_res.numel() + 1

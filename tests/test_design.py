@@ -60,6 +60,17 @@ def test_result_save_load_round_trip(solved, tmp_path):
     assert DesignProblem.from_config(back.problem).to_config() == res.problem
 
 
+def test_warm_start_from_a_solution_returns_to_it(solved):
+    prob, res = solved
+    again = prob.solve(warm_start=res)
+    assert again.stats["success"]
+    # The loss is flat near its minimisers: IPOPT stops within 1% of the first objective.
+    assert again.stats["objective"] == pytest.approx(res.stats["objective"], rel=1e-2)
+    assert again.stats["iterations"] < res.stats["iterations"]
+    with pytest.raises(rq.InputError, match="panels"):
+        replace(prob, panels=(10, 10)).transcribe(initial=res)
+
+
 def test_start_matches_target_spacing():
     prob = small("sphere_cap")
     st = prob.start()
