@@ -239,7 +239,7 @@ class DesignProblem:
                            "solve_time": time.perf_counter() - t0 - t_build,
                            "objective": float(sol["f"]), "history": history,
                            "transcription": self.transcription, "hessian": self.hessian}
-            if not stats["success"]:
+            if not stats["success"] or log.reached:
                 break
         if not stats["success"]:
             if stats["return_status"] in _INFEASIBLE:
