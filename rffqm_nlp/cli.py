@@ -94,12 +94,6 @@ def warn(message: str) -> None:
     console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
-def prepare_out(out: Path, force: bool) -> None:
-    """Create the output folder; refuse a non-empty one without ``force``."""
-    check_out_dir(out, force)
-    out.mkdir(parents=True, exist_ok=True)
-
-
 def check_out_dir(out: Path, force: bool) -> None:
     """Refuse an output folder that is a file, or not empty without ``force``, or cannot be
     created; touches nothing (run it before a long computation)."""
