@@ -166,3 +166,15 @@ def test_stop_rms_stops_early_at_a_feasible_fit():
     assert early.fit["rms"] <= 0.012 + 1e-12
     assert early.stats["iterations"] < full.stats["iterations"]
     assert early.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", TARGETS)
+def test_bundled_targets_meet_the_fit_goal_at_20x20(name):
+    """The goal of the inverse design: at 20 x 20 panels with the bundled settings, the
+    aligned coarse lattice is within 1% of the diameter (RMS) and within a quarter of the
+    best plane's RMS. About a minute each; run with ``pytest -m slow``."""
+    res = DesignProblem.load(f"targets/{name}.toml").solve()
+    assert res.fit["rms"] <= 0.01
+    assert res.fit["rms"] <= 0.25 * res.fit["plane_rms"]
+    assert res.fit["min_side_over_mean"] >= 0.2 * (1 - 1e-6)
