@@ -15,6 +15,7 @@ state the same problem.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -120,7 +121,7 @@ class Setup:
         """The Tikhonov reference: boundary data vector and omega of the Miura start."""
         return np.concatenate([self.reference.to_vector(), [self.reference_omega]])
 
-    @property
+    @cached_property
     def mu_outside(self) -> np.ndarray:
         """Per panel (column-major): is |mu_abc| above 1 at the Miura start? (held)"""
         mu0 = pattern_function(self.reference.N, self.reference.M).call(

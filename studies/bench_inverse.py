@@ -21,6 +21,8 @@ start and at IPOPT's answer (relative difference must be <= 1e-10).
 Part B: sequential vs simultaneous transcription at 8x8 and 12x12 (time, iterations,
 status, peak RSS of the subprocess).
 
+Part C: IPOPT (sequential) alone at 20x20 (--ipopt-only), in the part B table.
+
     python studies/bench_inverse.py [--sizes 8 12] [--budget 120] [--ipopt-only 20]
 """
 
@@ -255,7 +257,7 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=120.0, help="L-BFGS-B seconds per case")
     ap.add_argument("--sim-time", type=float, default=90.0,
                     help="IPOPT time limit of the simultaneous transcription")
-    ap.add_argument("--ipopt-only", type=int, nargs="*", default=[],
+    ap.add_argument("--ipopt-only", type=int, nargs="*", default=[20],
                     help="extra sizes for IPOPT (sequential) alone")
     ap.add_argument("--layout", default=LAYOUT, help="Miura layout of the start")
     ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "bench_inverse.md")

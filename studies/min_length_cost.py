@@ -73,7 +73,11 @@ def main() -> None:
         ml = [e["ml"] for e in entries]
         style = "-" if layout == "zigzag_i" else "--"
         ax1.plot(ml, [100 * e["rms"] for e in entries], "o" + style, label=f"{layout}, {n}x{n}")
-        ax2.plot(ml, [e["iters"] for e in entries], "s" + style, label=f"{layout}, {n}x{n}")
+        line, = ax2.plot(ml, [e["iters"] for e in entries], "s" + style,
+                         label=f"{layout}, {n}x{n}")
+        failed = [e for e in entries if not np.isfinite(e["rms"])]
+        ax2.plot([e["ml"] for e in failed], [e["iters"] for e in failed], "x", ms=12, mew=2.5,
+                 color="k", label="IPOPT failed" if failed and not ax2.lines[:-1] else None)
     ax1.axvline(0.2, color="0.6", ls=":", lw=1)
     ax2.axvline(0.2, color="0.6", ls=":", lw=1)
     ax1.set_xlabel("min_length (smallest side / mean side)")
@@ -82,7 +86,7 @@ def main() -> None:
     ax1.set_ylim(bottom=0)
     ax2.set_xlabel("min_length (smallest side / mean side)")
     ax2.set_ylabel("IPOPT iterations")
-    ax2.set_title("iterations")
+    ax2.set_title("iterations (x: IPOPT failed, no fit)")
     ax2.set_ylim(bottom=0)
     for a in (ax1, ax2):
         a.grid(alpha=0.3)
