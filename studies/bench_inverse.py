@@ -380,8 +380,8 @@ def main() -> None:
         f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; {platform.machine()}, {os.cpu_count()} "
         f"CPUs; Python {platform.python_version()}, NumPy {np.__version__}, CasADi "
         f"{ca.__version__}; load average (1 min) {load0:.1f} at start, {os.getloadavg()[0]:.1f} "
-        f"at end (another long job shared the 2 cores: wall times are inflated, "
-        f"roughly equally for both methods); whole run {total:.0f} s",
+        f"at end (the load includes this run's own processes; "
+        f"no other job ran at the same time); whole run {total:.0f} s",
         f"- problem: targets/sphere_cap.toml at 2N x 2N panels, layout {LAYOUT}, stop_rms=None, "
         "default weights "
         f"{problem(8).weights}, min_length 0.2, min_angle 0.15, mu_margin 0.02; same Miura start "

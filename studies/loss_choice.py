@@ -117,7 +117,7 @@ def main() -> None:
         "# Loss choice (`studies/loss_choice.py`)",
         "",
         f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; load average (1 min) {load0:.1f} at "
-        f"start, {os.getloadavg()[0]:.1f} at end (a second long job shared the 2 cores); "
+        f"start, {os.getloadavg()[0]:.1f} at end (the load includes this run's own process); "
         f"whole run {total:.0f} s",
         f"- targets/*.toml, layout {LAYOUT}, stop_rms=None, IPOPT time limit "
         f"{args.time_limit:.0f} s, default constraints (min_length 0.2, min_angle 0.15, "

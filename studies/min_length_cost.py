@@ -100,7 +100,7 @@ def main() -> None:
         "# Cost of the side-length constraint (`studies/min_length_cost.py`)",
         "",
         f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; load average (1 min) {load0:.1f} at "
-        f"start, {os.getloadavg()[0]:.1f} at end (a second long job shared the 2 cores); whole "
+        f"start, {os.getloadavg()[0]:.1f} at end (the load includes this run's own process); whole "
         f"run {total:.0f} s",
         f"- targets/sphere_cap.toml, layouts {', '.join(LAYOUTS)}, stop_rms=None, default weights "
         f"{base.weights}, min_angle {base.min_angle}, mu_margin {base.mu_margin}; IPOPT "
