@@ -21,7 +21,8 @@ import numpy as np
 
 from . import numpy_model, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
-from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed
+from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
+                     raise_for_ipopt)
 from .results import DesignResult
 
 PI = np.pi
@@ -29,7 +30,6 @@ DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1}
 TRANSCRIPTIONS = ("sequential", "simultaneous")
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
-_INFEASIBLE = ("Infeasible_Problem_Detected",)
 
 
 @dataclass(frozen=True)
@@ -244,15 +244,10 @@ class DesignProblem:
             if not stats["success"] or log.reached:
                 break
         if not stats["success"]:
-            if stats["return_status"] in _INFEASIBLE:
-                raise InfeasibleDesign(
-                    f"IPOPT status {stats['return_status']}: the constraints cannot all hold "
-                    f"({_violation_report(nlp, sol)}); relax min_length, min_angle or "
-                    "mu_margin")
-            raise SolverFailed(
-                f"IPOPT did not converge: status {stats['return_status']} after "
-                f"{iterations} iterations; raise max_iter or time_limit, or relax tol",
-                status=stats["return_status"], stats=solve_stats, last_iterate=x)
+            raise_for_ipopt(
+                stats["return_status"], iterations, "the design",
+                f"{_violation_report(nlp, sol)}; relax min_length, min_angle or mu_margin",
+                "raise max_iter or time_limit, or relax tol", solve_stats, x)
         return self._result(nlp, start, x, solve_stats)
 
     def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,

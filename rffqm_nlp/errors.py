@@ -70,3 +70,19 @@ class SolverFailed(RffqmError):
         self.status = status
         self.stats = stats or {}
         self.last_iterate = last_iterate
+
+
+def raise_for_ipopt(status: str, iterations: int, what: str, infeasible_hint: str,
+                    failed_hint: str, stats: dict | None = None,
+                    last_iterate: Any = None) -> None:
+    """Raise the named error for an unsuccessful IPOPT solve of ``what``.
+
+    IPOPT's "Infeasible_Problem_Detected" becomes :class:`InfeasibleDesign`; every other
+    status :class:`SolverFailed` carrying it, the solver statistics and the last iterate.
+    """
+    if status == "Infeasible_Problem_Detected":
+        raise InfeasibleDesign(f"IPOPT status {status} in {what}: the constraints cannot all "
+                               f"hold; {infeasible_hint}")
+    raise SolverFailed(f"IPOPT did not solve {what}: status {status} after {iterations} "
+                       f"iterations; {failed_hint}", status=status, stats=stats,
+                       last_iterate=last_iterate)

@@ -46,13 +46,12 @@ import casadi as ca
 import numpy as np
 
 from .boundary import BoundaryData
-from .errors import InfeasibleDesign, InputError, SolverFailed
+from .errors import InfeasibleDesign, InputError, SolverFailed, raise_for_ipopt
 from .lengths import length_maps
 
 OBJECTIVES: tuple[str, ...] = ("max_min", "uniform")
 #: Default lower bound on every side, as a fraction of the mean side.
 DEFAULT_MIN_LENGTH = 1e-3
-_INFEASIBLE = ("Infeasible_Problem_Detected",)
 
 
 @dataclass(frozen=True)
@@ -181,14 +180,10 @@ def _solve(name: str, x, f, g, opts: dict, x0, lbx, ubx, lbg, ubg) -> tuple[np.n
     stats = {"status": st["return_status"], "success": bool(st["success"]),
              "iterations": int(st["iter_count"]), "objective": float(sol["f"])}
     if not st["success"]:
-        if st["return_status"] in _INFEASIBLE:
-            raise InfeasibleDesign(
-                f"IPOPT status {st['return_status']} in the {name} problem: no lengths satisfy "
-                "the side bounds; lower min_length or change the boundary angles")
-        raise SolverFailed(
-            f"IPOPT did not solve the {name} side-length problem: status "
-            f"{st['return_status']} after {stats['iterations']} iterations",
-            status=st["return_status"], stats=stats, last_iterate=xs)
+        raise_for_ipopt(st["return_status"], stats["iterations"],
+                        f"the {name} side-length problem",
+                        "lower min_length or change the boundary angles",
+                        "raise max_iter or relax tol", stats, xs)
     return xs, float(sol["f"]), stats
 
 
