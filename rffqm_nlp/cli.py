@@ -357,25 +357,31 @@ def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem"
         warn(f"render.png and folding.gif skipped: {reason}")
 
 
-def _summary(result: "DesignResult", out: Path) -> Table:
-    fit, stats = result.fit, result.stats
-    N, M = result.pattern.N, result.pattern.M
-    table = Table(title=f"design: {N} x {M} panels")
+def quantity_table(title: str, rows: list[tuple[str, str]]) -> Table:
+    """A two-column rich table of named quantities."""
+    table = Table(title=title)
     table.add_column("quantity")
     table.add_column("value", justify="right")
-    table.add_row("fit RMS to the target lattice (/ diameter)", f"{fit['rms']:.3e}")
-    table.add_row("fit RMS to the target surface (/ diameter)", f"{fit['rms_surface']:.3e}")
-    table.add_row("Hausdorff distance (/ diameter)", f"{fit['hausdorff']:.3e}")
-    table.add_row("best plane RMS, for comparison (/ diameter)", f"{fit['plane_rms']:.3e}")
-    table.add_row("smallest side / mean side", f"{fit['min_side_over_mean']:.4g}")
-    table.add_row("smallest sector angle (rad)", f"{fit['min_sector_angle']:.4g}")
-    table.add_row("designed omega (rad)", f"{result.omega:.6g}")
-    table.add_row("iterations", str(stats.get("iterations", "?")))
-    total = float(stats.get("build_time", 0.0)) + float(stats.get("solve_time", 0.0))
-    table.add_row("time (s)", f"{total:.1f} (build {stats.get('build_time', 0.0):.1f})")
-    table.add_row("status", str(stats.get("status", "?")))
-    table.add_row("output", str(out))
+    for name, value in rows:
+        table.add_row(name, value)
     return table
+
+
+def _summary(result: "DesignResult", out: Path) -> Table:
+    fit, stats = result.fit, result.stats
+    total = float(stats.get("build_time", 0.0)) + float(stats.get("solve_time", 0.0))
+    return quantity_table(f"design: {result.pattern.N} x {result.pattern.M} panels", [
+        ("fit RMS to the target lattice (/ diameter)", f"{fit['rms']:.3e}"),
+        ("fit RMS to the target surface (/ diameter)", f"{fit['rms_surface']:.3e}"),
+        ("Hausdorff distance (/ diameter)", f"{fit['hausdorff']:.3e}"),
+        ("best plane RMS, for comparison (/ diameter)", f"{fit['plane_rms']:.3e}"),
+        ("smallest side / mean side", f"{fit['min_side_over_mean']:.4g}"),
+        ("smallest sector angle (rad)", f"{fit['min_sector_angle']:.4g}"),
+        ("designed omega (rad)", f"{result.omega:.6g}"),
+        ("iterations", str(stats.get("iterations", "?"))),
+        ("time (s)", f"{total:.1f} (build {stats.get('build_time', 0.0):.1f})"),
+        ("status", str(stats.get("status", "?"))),
+        ("output", str(out))])
 
 
 # --------------------------------------------------------------------------- fold
@@ -559,11 +565,8 @@ def march(
                 write_atomic(tmp / "frames.json",
                              json.dumps({"omega": om.tolist(), "Y": states.tolist()}).encode())
     spread = length_spread(pat.lh, pat.lv)
-    table = Table(title=f"{rows} x {cols} panels, omega = {omega:g}")
-    table.add_column("quantity")
-    table.add_column("value", justify="right")
-    table.add_row("smallest side / mean", f"{spread['min_over_mean']:.4g}")
-    table.add_row("largest side / smallest", f"{spread['max_over_min']:.4g}")
-    table.add_row("smallest sector angle (rad)", f"{pat.panel_angles.min():.4g}")
-    table.add_row("output", str(out))
-    Console().print(table)
+    Console().print(quantity_table(f"{rows} x {cols} panels, omega = {omega:g}", [
+        ("smallest side / mean", f"{spread['min_over_mean']:.4g}"),
+        ("largest side / smallest", f"{spread['max_over_min']:.4g}"),
+        ("smallest sector angle (rad)", f"{pat.panel_angles.min():.4g}"),
+        ("output", str(out))]))
