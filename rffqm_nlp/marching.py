@@ -310,8 +310,8 @@ def march(bd: BoundaryData) -> Pattern:
     """
     if not isinstance(bd, BoundaryData):
         raise InputError(f"march expects BoundaryData, got {type(bd).__name__}")
-    out = pattern_function(bd.N, bd.M).call(boundary_inputs(bd))
-    alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = (np.array(o.full()) for o in out)
+    out = _Evaluation(pattern_function(bd.N, bd.M), boundary_inputs(bd)).run()
+    alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = out
     failure = locate_failure(alpha_d, mu, lh, lv)
     if failure is not None:
         check, (i, j) = failure
@@ -338,16 +338,54 @@ def fold(pat: Pattern, omega) -> np.ndarray:
     if not isinstance(pat, Pattern):
         raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")
     om = check_omega(omega)
-    f = fold_function(pat.N, pat.M)
-    args = [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv]
-    if om.ndim == 0:
-        return np.stack([o.full() for o in f.call([*args, float(om)])], axis=-1)
-    K = om.size
-    fk = f.map("fold_k", "serial", K, [0, 1, 2, 3, 4], [])  # the pattern is shared, not copied
-    outs = fk.call([*args, om[None, :]])
-    n1 = pat.N + 1
-    return np.stack([o.full().reshape(n1, K, pat.M + 1).transpose(1, 0, 2) for o in outs],
-                    axis=-1)
+    ev = _Evaluation(fold_function(pat.N, pat.M),
+                     [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
+    states = []
+    for w in np.atleast_1d(om):
+        ev.set(5, w)
+        states.append(np.stack(ev.run(), axis=-1))
+    return states[0] if om.ndim == 0 else np.stack(states)
+
+
+class _Evaluation:
+    """A CasADi Function evaluated on NumPy arrays in place, through its buffer.
+
+    This skips the DM conversions of ``Function.call`` (about half the time of a large
+    march or fold, measured in studies/bench_forward.py's profiling) and lets one input be
+    changed between runs.
+    """
+
+    def __init__(self, f: ca.Function, args: list):
+        self._f = f
+        self._buf, self._trigger = f.buffer()
+        self._args = [np.ascontiguousarray(np.asarray(a, dtype=float).ravel(order="F"))
+                      for a in args]
+        for k, a in enumerate(self._args):
+            self._buf.set_arg(k, memoryview(a))
+        self._res = [np.empty(f.nnz_out(k)) for k in range(f.n_out())]
+        for k, r in enumerate(self._res):
+            self._buf.set_res(k, memoryview(r))
+        # Outputs can be structurally sparse (e.g. y^{11} = 0): scatter the nonzeros.
+        self._where = [None if f.sparsity_out(k).is_dense()
+                       else tuple(np.asarray(i) for i in f.sparsity_out(k).get_triplet())
+                       for k in range(f.n_out())]
+
+    def set(self, k: int, value) -> None:
+        """Overwrite input ``k`` in place (same size)."""
+        self._args[k][:] = np.asarray(value, dtype=float).ravel(order="F")
+
+    def run(self) -> list[np.ndarray]:
+        """Evaluate; fresh dense output arrays in the Function's output shapes."""
+        self._trigger()
+        out = []
+        for k, (r, where) in enumerate(zip(self._res, self._where)):
+            if where is None:
+                out.append(r.reshape(self._f.size_out(k), order="F").copy())
+            else:
+                dense = np.zeros(self._f.size_out(k))
+                dense[where] = r
+                out.append(dense)
+        return out
 
 
 def fold_angles(pat: Pattern, omega: float) -> tuple[np.ndarray, np.ndarray]:
