@@ -16,7 +16,7 @@ from scipy.optimize import linprog
 
 from .boundary import BoundaryData
 from .errors import InfeasibleDesign, InputError, MarchingError
-from .marching import boundary_inputs, locate_failure, pattern_function
+from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
 
 
@@ -46,8 +46,8 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
     second check.
     """
     N, M = bd.N, bd.M
-    out = pattern_function(N, M).call(boundary_inputs(bd))
-    alpha, beta, _, _, _, mu, alpha_d = (np.array(o.full()) for o in out[:7])
+    alpha, beta, _, _, _, mu, alpha_d, _, _ = evaluate(pattern_function(N, M),
+                                                       boundary_inputs(bd))
     failure = locate_failure(alpha_d, mu, np.ones((N + 1, M)), np.ones((N, M + 1)))
     if failure is not None:
         raise MarchingError(*failure)

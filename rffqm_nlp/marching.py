@@ -310,7 +310,7 @@ def march(bd: BoundaryData) -> Pattern:
     """
     if not isinstance(bd, BoundaryData):
         raise InputError(f"march expects BoundaryData, got {type(bd).__name__}")
-    out = _Evaluation(pattern_function(bd.N, bd.M), boundary_inputs(bd)).run()
+    out = evaluate(pattern_function(bd.N, bd.M), boundary_inputs(bd))
     alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = out
     failure = locate_failure(alpha_d, mu, lh, lv)
     if failure is not None:
@@ -345,6 +345,11 @@ def fold(pat: Pattern, omega) -> np.ndarray:
         ev.set(5, w)
         states.append(np.stack(ev.run(), axis=-1))
     return states[0] if om.ndim == 0 else np.stack(states)
+
+
+def evaluate(f: ca.Function, args: list) -> list[np.ndarray]:
+    """Evaluate ``f`` once on NumPy inputs; dense NumPy outputs (see :class:`_Evaluation`)."""
+    return _Evaluation(f, args).run()
 
 
 class _Evaluation:

@@ -22,9 +22,9 @@ import numpy as np
 
 from . import numpy_model, shape
 from .boundary import BoundaryData
-from .marching import (boundary_inputs, crease_quaternions, edge_directions, fold_function,
-                       folded_function, panel_cell, panel_quaternions_function, pattern_function,
-                       qmul, rotated_edges)
+from .marching import (boundary_inputs, crease_quaternions, edge_directions, evaluate,
+                       fold_function, folded_function, panel_cell, panel_quaternions_function,
+                       pattern_function, qmul, rotated_edges)
 
 PI = np.pi
 
@@ -124,8 +124,8 @@ class Setup:
     @cached_property
     def mu_outside(self) -> np.ndarray:
         """Per panel (column-major): is |mu_abc| above 1 at the Miura start? (held)"""
-        mu0 = pattern_function(self.reference.N, self.reference.M).call(
-            [ca.DM(a) for a in boundary_inputs(self.reference)])[5].full()
+        mu0 = evaluate(pattern_function(self.reference.N, self.reference.M),
+                       boundary_inputs(self.reference))[5]
         return np.abs(mu0.ravel(order="F")) > 1
 
     def mu_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -279,8 +279,8 @@ def simultaneous(setup: Setup) -> NLP:
     ubg = np.concatenate([np.zeros(n_eq), hi_mu, np.full(sides.numel(), np.inf)])
     # Start: the Miura pattern, its directions, panel rotations and folded state.
     args = [start.alpha, start.beta, start.sigma, start.lh, start.lv, setup.omega]
-    quat0 = [c.full() for c in panel_quaternions_function(N, M)(*args)]
-    Y0 = [c.full() for c in fold_function(N, M)(*args)]
+    quat0 = evaluate(panel_quaternions_function(N, M), args)
+    Y0 = evaluate(fold_function(N, M), args)
     a_sym, b_sym = ca.MX.sym("a", n1, m1), ca.MX.sym("b", n1, m1)
     theta0 = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])(
         start.alpha, start.beta)
