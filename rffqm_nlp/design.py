@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -26,10 +26,21 @@ from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
 from .results import DesignResult
 
 PI = np.pi
-DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1}
+DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1, "smoothness": 0.0}
 TRANSCRIPTIONS = ("sequential", "simultaneous")
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
+#: Largest sequential pattern (panels) whose NLP is expanded to SX; see DesignProblem._expand.
+SX_MAX_PANELS = 144
+#: IPOPT's barrier from a cold start. The loss is O(0.1) against hundreds of log-barrier
+#: terms, so IPOPT's default (monotone from mu = 0.1) first solves a different problem
+#: (angles near pi/2, sides ~8x the spacing): the simultaneous transcription loses
+#: feasibility there and never recovers, the sequential one needs 1.5-3x the iterations.
+#: Measured at 8 x 8 and 20 x 20 on the bundled targets: "adaptive" is fastest for the
+#: simultaneous NLP (20-36 iterations); for the sequential one it is also fast but found a
+#: worse local minimum of the 8 x 8 sphere cap, which mu_init = 1e-3 does not.
+COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
+                "simultaneous": {"ipopt.mu_strategy": "adaptive"}}
 
 
 @dataclass(frozen=True)
@@ -64,8 +75,11 @@ class DesignProblem:
     * ``omega_bounds``: bounds of the fold parameter;
     * ``fix``: groups held at their start, among "angles", "lengths", "omega";
     * ``weights``: loss weights, "forms" (the paper's fundamental-form loss) and "position"
-      (lattice positions after a rigid alignment that is part of the NLP); see
-      :func:`rffqm_nlp.transcription.loss_residuals`;
+      (lattice positions after a rigid alignment that is part of the NLP), see
+      :func:`rffqm_nlp.transcription.loss_residuals`; "regularization" (Tikhonov, towards
+      the Miura start) and "smoothness" (second differences of the boundary perturbation
+      along each edge, :func:`rffqm_nlp.transcription.smoothness_residuals`; default 0);
+      missing keys count as 0;
     * ``continuation``: multipliers of the regularization weight for successive solves, each
       warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
       fit improve; the default is one solve);
@@ -78,7 +92,7 @@ class DesignProblem:
       the target lattice (a fraction of the target's diameter) with every constraint holding
       (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance;
     * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
-      None: IPOPT's 0.1 from a cold start, 1e-6 from a warm start).
+      None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start).
     """
 
     target: surfaces.Surface
@@ -114,7 +128,8 @@ class DesignProblem:
         if not self.continuation or any(not c > 0 for c in self.continuation):
             raise InputError(f"continuation needs positive multipliers, got {self.continuation}")
         object.__setattr__(self, "omega_bounds", tuple(float(w) for w in self.omega_bounds))
-        object.__setattr__(self, "weights", {k: float(v) for k, v in self.weights.items()})
+        object.__setattr__(self, "weights", {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0),
+                                             **{k: float(v) for k, v in self.weights.items()}})
         _choice("layout", self.layout, LAYOUTS)
         _choice("transcription", self.transcription, TRANSCRIPTIONS)
         _choice("hessian", self.hessian, HESSIANS)
@@ -203,15 +218,22 @@ class DesignProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self, callback: Callable[[dict], None] | None = None,
-              warm_start: DesignResult | None = None, verbose: bool = False) -> DesignResult:
+              warm_start: DesignResult | None = None, verbose: bool = False,
+              multistart: int = 1, seed: int = 0) -> DesignResult:
         """Solve the design with IPOPT; see the module docstring.
 
         ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration.
         ``warm_start``: a result of a problem of the same size to start from instead of the
         Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern).
+        ``multistart`` > 1: solve from that many starting Miuras (the first the problem's own,
+        the others with alpha0 and omega0 perturbed, seeded by ``seed``) and keep the
+        successful result with the smallest fit["rms"]; see :func:`_multistart`.
         Raises :class:`InfeasibleDesign` when IPOPT finds the constraints infeasible,
-        :class:`SolverFailed` (with IPOPT's status and the last iterate) otherwise.
+        :class:`SolverFailed` (with IPOPT's status, the last iterate and the best feasible
+        one) otherwise.
         """
+        if multistart != 1:
+            return _multistart(self, multistart, seed, callback, warm_start, verbose)
         if self.min_length >= 1:
             raise InfeasibleDesign(
                 f"min_length = {self.min_length} asks every side to be at least the mean side, "
@@ -247,7 +269,7 @@ class DesignProblem:
             raise_for_ipopt(
                 stats["return_status"], iterations, "the design",
                 f"{_violation_report(nlp, sol)}; relax min_length, min_angle or mu_margin",
-                "raise max_iter or time_limit, or relax tol", solve_stats, x)
+                "raise max_iter or time_limit, or relax tol", solve_stats, x, log.best)
         return self._result(nlp, start, x, solve_stats)
 
     def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
@@ -256,7 +278,7 @@ class DesignProblem:
         opts: dict[str, Any] = {
             "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
             "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
-            "print_time": verbose, "ipopt.sb": "yes", "expand": True}
+            "print_time": verbose, "ipopt.sb": "yes", "expand": self._expand()}
         if self.time_limit is not None:
             opts["ipopt.max_wall_time"] = float(self.time_limit)
         if warm or self.barrier_init is not None:
@@ -264,6 +286,8 @@ class DesignProblem:
             mu_init = 1e-6 if self.barrier_init is None else self.barrier_init
             opts.update({"ipopt.mu_init": mu_init, "ipopt.bound_push": 1e-9,
                          "ipopt.bound_frac": 1e-9})
+        else:
+            opts.update(COLD_BARRIER[self.transcription])
         if self.hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         elif self.hessian == "gauss-newton":
@@ -279,6 +303,18 @@ class DesignProblem:
         solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
         return solver, log
+
+    def _expand(self) -> bool:
+        """Expand the NLP to SX (fast evaluation, costly derivative build) or keep MX.
+
+        The simultaneous NLP is local, so its SX derivatives are small. The sequential one
+        is dense: its SX Hessian costs 3-5 s to build at 8 x 8 panels, 20-30 s and 3 GB at
+        20 x 20, while the MX Hessian builds in under 3 s at any size but costs 0.1-0.4 s per
+        evaluation (studies/results/bench_inverse.md); SX wins up to
+        :data:`SX_MAX_PANELS` panels.
+        """
+        return (self.transcription == "simultaneous"
+                or self.panels[0] * self.panels[1] <= SX_MAX_PANELS)
 
     def _fit_reached(self, nlp: transcription.NLP, start: Start):
         """For ``stop_rms``: does the aligned coarse lattice at x fit the target well enough?"""
@@ -406,7 +442,8 @@ def _violation_report(nlp: transcription.NLP, sol) -> str:
 
 class _IterationLog(ca.Callback):
     """IPOPT iteration callback: records objective and constraint violation per iteration,
-    and asks IPOPT to stop once ``stop(x)`` holds at an iterate that satisfies the constraints.
+    keeps the best feasible iterate (``best``) and asks IPOPT to stop once ``stop(x)`` holds at
+    an iterate that satisfies the constraints.
     """
 
     #: constraint violation below which an iterate counts as feasible for ``stop``
@@ -416,6 +453,8 @@ class _IterationLog(ca.Callback):
         ca.Callback.__init__(self)
         self._stop = stop
         self.reached = False
+        self.best: np.ndarray | None = None
+        self._best_objective = np.inf
         self._nx, self._ng = nlp.x.numel(), nlp.g.numel()
         self._lbg, self._ubg = nlp.lbg, nlp.ubg
         self._history = history
@@ -455,7 +494,88 @@ class _IterationLog(ca.Callback):
             self._history[key].append(value)
         if self._callback is not None:
             self._callback(entry)
-        if self._stop is not None and viol <= self.FEASIBLE:
+        if viol <= self.FEASIBLE:
             x = np.asarray(arg[ca.nlpsol_out().index("x")]).ravel()
-            self.reached = bool(self._stop(x))
+            if entry["objective"] < self._best_objective:
+                self.best, self._best_objective = x.copy(), entry["objective"]
+            if self._stop is not None:
+                self.reached = bool(self._stop(x))
         return [int(self.reached)]
+
+
+# ---------------------------------------------------------------------- multistart
+#: Half-widths (radians) of the uniform perturbations of alpha0 and omega0 of the starts
+#: 1, 2, ... of a multistart; the perturbed values are clipped into their valid ranges.
+MULTISTART_SPREAD = {"alpha0": 0.3, "omega0": 0.6}
+
+
+def multistart_starts(problem: DesignProblem, starts: int, seed: int) -> list[tuple[float, float]]:
+    """(alpha0, omega0) of each start of a multistart: the problem's own first, then
+    ``starts - 1`` seeded uniform perturbations by :data:`MULTISTART_SPREAD`, clipped to
+    alpha0 in [min_angle + 0.05, pi/2 - 0.05] and omega0 inside ``omega_bounds`` (5% of
+    their width away from each end)."""
+    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 1:
+        raise InputError(f"multistart must be a whole number of starts >= 1, got {starts!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
+    rng = np.random.default_rng(int(seed))
+    lo, hi = problem.omega_bounds
+    margin = 0.05 * (hi - lo)
+    alpha = np.clip(problem.alpha0 + rng.uniform(-1, 1, starts - 1) * MULTISTART_SPREAD["alpha0"],
+                    problem.min_angle + 0.05, PI / 2 - 0.05)
+    omega = np.clip(problem.omega0 + rng.uniform(-1, 1, starts - 1) * MULTISTART_SPREAD["omega0"],
+                    lo + margin, hi - margin)
+    return [(problem.alpha0, problem.omega0)] + [(float(a), float(w)) for a, w in zip(alpha, omega)]
+
+
+def _multistart(problem: DesignProblem, starts: int, seed: int,
+                callback: Callable[[dict], None] | None, warm_start: DesignResult | None,
+                verbose: bool) -> DesignResult:
+    """Solve ``problem`` from each start of :func:`multistart_starts`; keep the best.
+
+    A start that ends in :class:`InfeasibleDesign` or :class:`SolverFailed` is recorded and
+    skipped; the result is the successful start with the smallest fit["rms"], with the
+    problem as asked (``result.problem``) and ``result.stats["multistart"]`` = {"starts",
+    "seed", "chosen" (index of the kept start), "time" (all starts, s), "runs": one entry
+    per start with alpha0, omega0, status, rms (None when it failed), iterations, time and
+    reason}. When every start fails, raises :class:`InfeasibleDesign` if all were
+    infeasible, else :class:`SolverFailed` with the status of the first failed solve.
+    """
+    if warm_start is not None:
+        raise InputError("multistart and warm_start exclude each other: a warm start replaces "
+                         "the starting Miuras that multistart varies")
+    t0 = time.perf_counter()
+    runs: list[dict[str, Any]] = []
+    errors: list[InfeasibleDesign | SolverFailed] = []
+    best: tuple[int, DesignResult] | None = None
+    for k, (alpha0, omega0) in enumerate(multistart_starts(problem, starts, seed)):
+        t1 = time.perf_counter()
+        run: dict[str, Any] = {"start": k, "alpha0": alpha0, "omega0": omega0}
+        try:
+            res = replace(problem, alpha0=alpha0, omega0=omega0).solve(callback=callback,
+                                                                         verbose=verbose)
+        except (InfeasibleDesign, SolverFailed) as exc:
+            errors.append(exc)
+            run.update(status=getattr(exc, "status", "") or "Infeasible_Problem_Detected",
+                       rms=None, iterations=None, reason=" ".join(str(exc).split()))
+        else:
+            run.update(status=res.stats["status"], rms=res.fit["rms"],
+                       iterations=res.stats["iterations"], reason="")
+            if best is None or res.fit["rms"] < best[1].fit["rms"]:
+                best = (k, res)
+        run["time"] = time.perf_counter() - t1
+        runs.append(run)
+    if best is None:
+        statuses = ", ".join(sorted({r["status"] for r in runs}))
+        message = (f"all {starts} starts of the multistart failed ({statuses}); the problem's "
+                   f"own start: {errors[0]}")
+        failed = [e for e in errors if isinstance(e, SolverFailed)]
+        if not failed:
+            raise InfeasibleDesign(message) from errors[0]
+        raise SolverFailed(message, status=failed[0].status, stats=failed[0].stats,
+                           last_iterate=failed[0].last_iterate) from failed[0]
+    chosen, res = best
+    stats = dict(res.stats, multistart={"starts": starts, "seed": seed, "chosen": chosen,
+                                        "time": time.perf_counter() - t0, "runs": runs})
+    return replace(res, stats=stats, problem=problem.to_config())
+

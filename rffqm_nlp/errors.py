@@ -61,28 +61,35 @@ class InfeasibleDesign(RffqmError):
 
 
 class SolverFailed(RffqmError):
-    """IPOPT (or another solver) did not succeed; carries its status and the last iterate."""
+    """IPOPT (or another solver) did not succeed; carries its status and the last iterate.
+
+    ``best_iterate`` is the feasible iterate with the smallest objective the solver visited
+    (None when it visited none or does not report iterates); it can warm-start a new solve.
+    """
 
     def __init__(
-        self, message: str, status: str = "", stats: dict | None = None, last_iterate: Any = None
+        self, message: str, status: str = "", stats: dict | None = None, last_iterate: Any = None,
+        best_iterate: Any = None,
     ):
         super().__init__(message)
         self.status = status
         self.stats = stats or {}
         self.last_iterate = last_iterate
+        self.best_iterate = best_iterate
 
 
 def raise_for_ipopt(status: str, iterations: int, what: str, infeasible_hint: str,
                     failed_hint: str, stats: dict | None = None,
-                    last_iterate: Any = None) -> None:
+                    last_iterate: Any = None, best_iterate: Any = None) -> None:
     """Raise the named error for an unsuccessful IPOPT solve of ``what``.
 
     IPOPT's "Infeasible_Problem_Detected" becomes :class:`InfeasibleDesign`; every other
-    status :class:`SolverFailed` carrying it, the solver statistics and the last iterate.
+    status :class:`SolverFailed` carrying it, the solver statistics, the last iterate and the
+    best feasible one.
     """
     if status == "Infeasible_Problem_Detected":
         raise InfeasibleDesign(f"IPOPT status {status} in {what}: the constraints cannot all "
                                f"hold; {infeasible_hint}")
     raise SolverFailed(f"IPOPT did not solve {what}: status {status} after {iterations} "
                        f"iterations; {failed_hint}", status=status, stats=stats,
-                       last_iterate=last_iterate)
+                       last_iterate=last_iterate, best_iterate=best_iterate)

@@ -145,7 +145,7 @@ def fold_multipliers(alpha, beta, sigma):
     return kh, kv
 
 
-def _crease_quaternion(theta, k, c, s, sign=1.0):
+def crease_quaternion(theta, k, c, s, sign=1.0):
     """Unit quaternion of R_t(sign * gamma), t = (cos theta, sin theta, 0), tan(gamma/2) = k s/c."""
     r = ca.sqrt(c * c + k * k * s * s)
     w, sh = c / r, sign * k * s / r
@@ -241,8 +241,8 @@ def crease_quaternions(alpha, beta, sigma, theta_h, omega):
     c, s = ca.cos(omega / 2), ca.sin(omega / 2)
     kh, kv = fold_multipliers(alpha, beta, sigma)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
-    qv = _crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
-    qh = _crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
+    qv = crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
+    qh = crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
     return qv, qh
 
 

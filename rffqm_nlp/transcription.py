@@ -21,8 +21,9 @@ import casadi as ca
 import numpy as np
 
 from . import numpy_model, shape
+from . import vertex as vx
 from .boundary import BoundaryData
-from .marching import (boundary_inputs, crease_quaternions, edge_directions, evaluate,
+from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
                        fold_function, folded_function, panel_cell, panel_quaternions_function,
                        pattern_function, qmul, rotated_edges)
 
@@ -138,17 +139,42 @@ class Setup:
 
 
 def _objective_residuals(setup: Setup, Y, rigid, boundary_vec) -> ca.MX:
-    """Loss, quaternion normalisation and the Tikhonov term towards the Miura start."""
+    """Loss, quaternion normalisation, the Tikhonov term towards the Miura start and the
+    smoothness of the boundary perturbation (lengths in units of the lattice spacing)."""
     q, t = rigid[:4], rigid[4:]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
     scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
-    return ca.vertcat(
-        loss_residuals(Y, rotation_from_quaternion(q), t, setup.target, setup.weights,
-                       setup.spacing),
-        ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
-        np.sqrt(setup.weights.get("regularization", 0) / scale.size)
-        * (boundary_vec - ref) * scale)
+    delta = (boundary_vec - ref) * scale
+    out = [loss_residuals(Y, rotation_from_quaternion(q), t, setup.target, setup.weights,
+                          setup.spacing),
+           ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
+           np.sqrt(setup.weights.get("regularization", 0) / scale.size) * delta]
+    if setup.weights.get("smoothness", 0) > 0:
+        kinks = smoothness_residuals(delta, setup.reference.N, setup.reference.M)
+        out.append(np.sqrt(setup.weights["smoothness"] / kinks.numel()) * kinks)
+    return ca.vertcat(*out)
+
+
+def smoothness_residuals(delta, N: int, M: int):
+    """Second differences of a boundary perturbation along the left and the bottom edge.
+
+    ``delta`` follows :meth:`BoundaryData.to_vector` (alphas, betas, then l_left, l_bottom;
+    a trailing omega is ignored). Angles are differenced along the left edge (N+1 vertices)
+    and along the bottom edge with the corner (M+1 vertices); the lengths along each edge.
+    Zero exactly when the perturbation is affine along every edge.
+    """
+    nv = N + 1 + M
+
+    def second(v):
+        return v[2:] - 2 * v[1:-1] + v[:-2]
+
+    parts = []
+    for k in (0, nv):  # alpha, then beta
+        parts += [second(delta[k:k + N + 1]),
+                  second(ca.vertcat(delta[k], delta[k + N + 1:k + nv]))]
+    parts += [second(delta[2 * nv:2 * nv + N]), second(delta[2 * nv + N:2 * nv + N + M])]
+    return ca.vertcat(*parts)
 
 
 def sequential(setup: Setup) -> NLP:
@@ -223,6 +249,51 @@ class _Layout:
         return self.slices[name].start + np.atleast_1d(grid[rows, cols]).ravel()
 
 
+def _running_mean(sides, C):
+    """Banded statement of the mean side: C_k = C_{k-1} + s_k / K (C_0 = s_0 / K), so that
+    C_{K-1} is the mean of the K sides.
+
+    One equation sum(s) = K * mean would be a dense row of the constraint Jacobian, and the
+    mean a dense column (it enters every side constraint); CasADi colours Jacobians in one
+    direction, so that row and column together cost a sweep per side (841 forward, 1601
+    reverse colours at 20 x 20 panels). The running mean keeps every row local.
+    Returns (residuals, mean).
+    """
+    K = sides.numel()
+    return ca.vertcat(C[0] - sides[0] / K, C[1:] - C[:-1] - sides[1:] / K), C[K - 1]
+
+
+def _fold_multipliers_kv(sigma: np.ndarray):
+    """The constant parts of :func:`marching.fold_multipliers`: kh0 (1 x M+1) and the
+    cumulative sign products down the columns, so that kv[i, j] = -kh0[j] / m2[0, j] * sp[i, j]
+    and kh[i, j] = -kv[i, j] * m2[i, j]."""
+    kh0 = np.concatenate([[1.0], np.cumprod(-sigma[0, 1:])])
+    sp = np.vstack([np.ones((1, sigma.shape[1])), np.cumprod(sigma[1:, :], axis=0)])
+    return kh0, sp
+
+
+def _local_crease_quaternions(A, B, sigma: np.ndarray, TH, omega, KV):
+    """:func:`marching.crease_quaternions` with the column factors lifted.
+
+    The fold multiplier kv[i, j] of every vertex of column j carries 1 / m2 of the bottom
+    vertex (i = 0), which would couple each crease of a column to that vertex. KV (N-1 x M)
+    holds kv[1:N, :M] as variables with the local chain KV[i] = sigma[i] KV[i-1] (and the
+    bottom row from its vertex), so every row stays local. Returns (qv, qh, residuals).
+    """
+    N, M = A.shape[0] - 1, A.shape[1] - 1
+    kh0, _ = _fold_multipliers_kv(sigma)
+    S = ca.DM(sigma)
+    m2 = vx.mu2(A, B, S)
+    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
+    theta_v = TH[:-1, :] + A[:-1, :]
+    kv_row0 = -ca.DM(kh0).T / m2[0, :]  # kv[0, :]
+    qv = crease_quaternion(theta_v[0, 1:M], kv_row0[0, 1:M], c, s, sign=-1.0)
+    qh = crease_quaternion(TH[1:N, :M], -KV * m2[1:N, :M], c, s)
+    res = ca.vertcat(ca.vec(KV[0, :] - S[1, :M] * kv_row0[0, :M]),
+                     ca.vec(KV[1:, :] - S[2:N, :M] * KV[:N - 2, :]))
+    return qv, qh, res
+
+
 def simultaneous(setup: Setup) -> NLP:
     """The simultaneous transcription: every vertex angle, side, edge direction, panel
     rotation (quaternion) and folded vertex is a variable, and the marching equations are
@@ -231,6 +302,15 @@ def simultaneous(setup: Setup) -> NLP:
     Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
     d, l_cd, l_bd. Kinematics: edge directions accumulate sector angles, panel quaternions
     multiply by crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc).
+
+    Every equality row is local (a panel and its neighbours): the column factors of the fold
+    multipliers are lifted (KV, see :func:`_local_crease_quaternions`) and the mean side is
+    a running mean (C, see :func:`_running_mean`), so the Jacobian colours in about 15
+    forward sweeps whatever the size. Solve it with ``mu_strategy = adaptive`` (or a small
+    ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1 the barrier terms
+    (hundreds of logs against a loss of about 0.05) pull this infeasible-path method towards
+    square panels and long sides (the central point at mu = 0.1 has all angles in
+    [1.53, 1.61] and sides 8x the spacing), where it loses feasibility and never returns.
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
@@ -238,7 +318,7 @@ def simultaneous(setup: Setup) -> NLP:
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
                    "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
                    "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "omega": (1, 1),
-                   "mean": (1, 1), "rigid": (7, 1)})
+                   "KV": (N - 1, M), "C": (n1 * M + N * m1, 1), "rigid": (7, 1)})
     x = ca.MX.sym("x", lay.size)
     v = lay.views(x)
     A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
@@ -257,7 +337,7 @@ def simultaneous(setup: Setup) -> NLP:
     th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
                         ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
     quat = [v["Qw"], v["Qx"], v["Qy"], v["Qz"]]
-    qv, qh = crease_quaternions(A, B, S, TH, omega)
+    qv, qh, kv_res = _local_crease_quaternions(A, B, start.sigma, TH, omega, v["KV"])
     prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
     prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
     q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
@@ -270,10 +350,12 @@ def simultaneous(setup: Setup) -> NLP:
     bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
     res = _objective_residuals(setup, Y, v["rigid"], bvec)
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
+    mean_res, mean = _running_mean(sides, v["C"])
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
-    n_eq = march_res.numel() + th_res.numel() + q_res.numel() + y_res.numel() + 1
-    g = ca.vertcat(march_res, th_res, q_res, y_res, ca.sum1(sides) - sides.numel() * v["mean"],
-                   sign * (mu ** 2 - 1), sides - setup.min_length * v["mean"])
+    n_eq = (march_res.numel() + th_res.numel() + kv_res.numel() + q_res.numel()
+            + y_res.numel() + mean_res.numel())
+    g = ca.vertcat(march_res, th_res, kv_res, q_res, y_res, mean_res,
+                   sign * (mu ** 2 - 1), sides - setup.min_length * mean)
     lo_mu, hi_mu = setup.mu_bounds()
     lbg = np.concatenate([np.zeros(n_eq), lo_mu, np.zeros(sides.numel())])
     ubg = np.concatenate([np.zeros(n_eq), hi_mu, np.full(sides.numel(), np.inf)])
@@ -284,10 +366,14 @@ def simultaneous(setup: Setup) -> NLP:
     a_sym, b_sym = ca.MX.sym("a", n1, m1), ca.MX.sym("b", n1, m1)
     theta0 = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])(
         start.alpha, start.beta)
+    kh0, sp = _fold_multipliers_kv(start.sigma)
+    kv0 = (-kh0 / vx.mu2(start.alpha, start.beta, start.sigma)[0, :] * sp)[1:N, :M]
     x0 = lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
                    "TH": theta0.full(), "Qw": quat0[0], "Qx": quat0[1], "Qy": quat0[2],
                    "Qz": quat0[3], "Yx": Y0[0], "Yy": Y0[1], "Yz": Y0[2],
-                   "omega": setup.omega, "mean": start.side_lengths.mean(),
+                   "omega": setup.omega, "KV": kv0,
+                   "C": np.cumsum(np.concatenate([start.lh.ravel("F"), start.lv.ravel("F")]))
+                   / start.side_lengths.size,
                    "rigid": setup.rigid0()})
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     for name in ("A", "B"):
