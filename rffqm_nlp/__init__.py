@@ -18,7 +18,7 @@ from .design import DesignProblem
 from .results import DesignResult
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
-               "shape", "design", "transcription", "results", "io", "viz", "cli")
+               "shape", "design", "transcription", "results", "io", "viz", "cli", "sweep")
 
 
 def __getattr__(name: str):

@@ -1,8 +1,10 @@
 """The ``rffqm`` command: thin wrappers that parse, call the library and write files.
 
-Commands: ``design`` (inverse design of a TOML target, with live IPOPT progress), ``fold``,
-``export`` and ``render`` (of a saved design result), ``targets`` (the built-in surfaces) and
-``march`` (forward marching of a perturbed Miura-ori).
+Commands: ``design`` (inverse design of a TOML target, with live IPOPT progress), ``sweep``
+(a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
+serially; resumable; see :mod:`rffqm_nlp.sweep`), ``fold``, ``export`` and ``render`` (of a
+saved design result), ``targets`` (the built-in surfaces) and ``march`` (forward marching of
+a perturbed Miura-ori).
 
 Every user error (missing or bad file, unknown target, a failed marching check, an
 infeasible design, a solver failure) ends with a one-line red reason and exit status 2,
@@ -382,6 +384,52 @@ def _summary(result: "DesignResult", out: Path) -> Table:
         ("time (s)", f"{total:.1f} (build {stats.get('build_time', 0.0):.1f})"),
         ("status", str(stats.get("status", "?"))),
         ("output", str(out))])
+
+
+# --------------------------------------------------------------------------- sweep
+@app.command("sweep")
+def sweep_cmd(
+    study: Path = typer.Argument(..., help="Study file (TOML): a base design and the "
+                                 "parameters to sweep, e.g. studies/sweep_example.toml.",
+                                 show_default=False),
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder; an existing one is "
+                             "resumed (finished designs are skipped).", show_default=False),
+    scheduler: str = typer.Option("local", "--scheduler", help="'local' (a Dask cluster on "
+                                  "this machine), 'none' (serially in this process) or the "
+                                  "address of a running Dask scheduler (tcp://host:8786)."),
+    workers: int = typer.Option(2, "--workers", min=1, help="Worker processes of the local "
+                                "cluster (one thread each)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Run a design study: every design of STUDY as one Dask task.
+
+    Writes into OUT: results.parquet and results.csv (one row per design: id, name, the
+    swept parameters, status, reason, fit, iterations, times, worker; rewritten as each
+    design finishes) and designs/ID/ (row.json, and result.json when solved, which
+    fold/export/render accept). Infeasible or failed designs are rows with their status and
+    reason; the command still succeeds. Re-running into OUT skips finished designs and
+    recomputes broken or missing ones.
+    """
+    from .sweep import run
+
+    with user_errors():
+        check_out_dir(out, force=True)
+        frame = run(study, out, scheduler=scheduler, workers=workers, progress=not quiet,
+                    console=console)
+    Console().print(_sweep_summary(frame, out))
+
+
+def _sweep_summary(frame, out: Path) -> Table:
+    """Designs per status, the best fit and the output files of a finished sweep."""
+    rows = [(f"designs {status}", str(n))
+            for status, n in frame["status"].value_counts().sort_index().items()]
+    solved = frame[frame["status"] == "solved"]
+    if len(solved):
+        best = solved.loc[solved["rms"].idxmin()]
+        rows.append(("best fit RMS (/ diameter)", f"{best['rms']:.3e}: {best['name']} "
+                     f"(designs/{best['id']})"))
+    rows.append(("table", f"{out / 'results.parquet'}, {out / 'results.csv'}"))
+    return quantity_table(f"sweep: {len(frame)} designs", rows)
 
 
 # --------------------------------------------------------------------------- fold

@@ -1,0 +1,877 @@
+"""Design studies at scale: parameter sweeps and multistart on Dask (extra ``sweep``).
+
+A :class:`Study` is a base design problem and the parameters to vary. Its TOML file::
+
+    base = "../targets/sphere_cap.toml"     # a design file, relative to this file; or inline:
+    [target]                                # [target] / [design] tables (keys here override
+    name = "sphere_cap"                     #   the base file's; setting target.name or
+    [design]                                #   target.python drops the base's target keys)
+    panels = [8, 8]
+    [solve]                                 # arguments of DesignProblem.solve
+    multistart = 1                          #   starts per design (keep the best fit)
+    seed = 0                                #   seed of the multistart perturbations
+    [sweep]                                 # dotted keys "<table>.<key>", table one of
+    "target.radius" = [3.0, 4.0]            #   target, design, solve: a list of values each
+    "design.layout" = ["zigzag_i", "zigzag_j"]   # (the grid is their product);
+    "design.panels" = [8, 12]               #   an integer p in design.panels means (p, p)
+    [[sweep.cases]]                         # optional: explicit combinations, crossed with
+    name = "small"                          #   the grid (a key may not be in both)
+    "target.domain" = [[-0.3, 0.3], [-0.3, 0.3]]
+
+With ``sample = K`` (and ``seed``) in [sweep], K designs are drawn at random instead of the
+whole grid: a list of values is drawn from uniformly, ``{low = a, high = b}`` (optionally
+``log = true``) uniformly in [a, b] (whole numbers for max_iter, multistart and seed); a
+study of lists only draws K distinct grid points.
+
+Every design gets a stable ``id`` (a hash of its full configuration, defaults included) and a
+readable ``name`` (its swept values). :func:`run` solves each design as one Dask task (a
+:class:`~distributed.LocalCluster` of single-threaded worker processes by default, an
+existing scheduler by address, or serially in this process with ``scheduler="none"``, using
+the same task function :func:`solve_design`) and streams the outcomes into ``OUT``:
+
+* ``designs/<id>/row.json``: the design's table row and configuration, written last;
+* ``designs/<id>/result.json``: the :class:`~rffqm_nlp.results.DesignResult` of a solved design;
+* ``results.parquet`` and ``results.csv``: one row per finished design, rewritten
+  atomically as each design finishes.
+
+A design that is infeasible or whose solver fails is a row with its status and reason; a
+design whose worker process dies (Dask's KilledWorker) is submitted again, up to
+``worker_retries`` times, and then is a row with status "worker_lost". Re-running a
+study into the same ``OUT`` skips every design whose folder holds a valid, matching outcome
+(solved, infeasible or failed); any other folder is removed and the design recomputed.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import itertools
+import json
+import logging
+import math
+import os
+import shutil
+import socket
+import time
+import tomllib
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .design import DesignProblem
+from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed
+from .io import atomic_path
+from .results import DesignResult
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from distributed import Client
+    from rich.console import Console
+
+#: Tables a swept key may address ("<table>.<key>").
+TABLES = ("target", "design", "solve")
+#: Keys of the [solve] table (arguments of DesignProblem.solve) and their defaults.
+SOLVE_DEFAULTS: dict[str, int] = {"multistart": 1, "seed": 0}
+#: Top-level keys of a study file.
+STUDY_KEYS = ("base", "description", "target", "design", "solve", "sweep")
+#: Keys of [sweep] that control the expansion rather than name a parameter.
+SWEEP_CONTROLS = ("sample", "seed", "cases")
+#: Keys of a random range {low, high, log}.
+RANGE_KEYS = ("low", "high", "log")
+#: Swept keys that take whole numbers (a range draws whole numbers for them).
+INTEGER_KEYS = ("design.max_iter", "solve.multistart", "solve.seed")
+#: Fit measures copied from DesignResult.fit into the table.
+FIT_COLUMNS = ("rms", "rms_surface", "hausdorff", "plane_rms", "min_side_over_mean",
+               "min_sector_angle")
+#: Outcome columns of every row, after id, name, case and the swept parameters.
+OUTCOME_COLUMNS = ("status", "solver_status", "reason", *FIT_COLUMNS, "iterations", "start",
+                   "build_time", "solve_time", "time", "worker", "host")
+#: Statuses of finished designs that a re-run keeps; "error" and "worker_lost" are retried.
+FINAL_STATUSES = ("solved", "infeasible", "failed")
+DESIGNS_DIR = "designs"
+ROW_FILE = "row.json"
+TABLE_NAME = "results"
+ROW_FORMAT = "rffqm-nlp sweep row"
+ROW_VERSION = 1
+#: Environment of local worker processes: one thread each for every numerical library.
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
+# --------------------------------------------------------------------------- the study
+@dataclass(frozen=True)
+class Range:
+    """A random parameter for ``sample = K``: uniform in [low, high] (log-uniform with
+    ``log``); whole numbers for the keys of :data:`INTEGER_KEYS`."""
+
+    low: float
+    high: float
+    log: bool = False
+
+    def __post_init__(self) -> None:
+        if not (_is_number(self.low) and _is_number(self.high)) or not self.low <= self.high:
+            raise InputError(f"a range needs numbers low <= high, got low = {self.low!r}, "
+                             f"high = {self.high!r}")
+        if not isinstance(self.log, bool):
+            raise InputError(f"log of a range is true or false, got {self.log!r}")
+        if self.log and not self.low > 0:
+            raise InputError(f"a log range needs low > 0, got {self.low!r}")
+
+    def draw(self, rng: np.random.Generator, integer: bool = False) -> float | int:
+        """One value drawn from this range (a whole number in it when ``integer``)."""
+        if integer:
+            low, high = math.ceil(self.low), math.floor(self.high)
+            if low > high:
+                raise InputError(f"the range [{self.low}, {self.high}] holds no whole number")
+            if self.log:
+                value = math.exp(rng.uniform(math.log(low), math.log(high)))
+                return min(max(int(round(value)), low), high)
+            return int(rng.integers(low, high, endpoint=True))
+        if self.log:
+            return float(math.exp(rng.uniform(math.log(self.low), math.log(self.high))))
+        return float(rng.uniform(self.low, self.high))
+
+
+@dataclass(frozen=True)
+class Design:
+    """One design of a study: ``config`` = {"target", "design", "solve"} with every default
+    filled in (what :func:`solve_design` solves), ``params`` its swept values by key,
+    ``case`` the name of its [[sweep.cases]] entry ("" when it has none)."""
+
+    id: str
+    name: str
+    params: dict[str, Any]
+    config: dict[str, Any]
+    case: str = ""
+
+    def payload(self) -> dict[str, Any]:
+        """What a task receives: plain data (CasADi objects do not pickle)."""
+        return {"id": self.id, "name": self.name, "config": self.config}
+
+
+@dataclass(frozen=True)
+class Study:
+    """A base design and the parameters to vary; see the module docstring.
+
+    ``base``: {"target": ..., "design": ..., "solve": ...} tables; ``parameters``: dotted
+    key -> list of values (or :class:`Range` with ``sample``); ``cases``: explicit
+    combinations (dotted key -> value, plus an optional "name"), crossed with the grid;
+    ``sample``: draw this many designs instead of the grid, with ``seed``; ``source``: the
+    study file, named in the errors of :meth:`designs`.
+    """
+
+    base: dict[str, Any]
+    parameters: dict[str, list | Range] = field(default_factory=dict)
+    cases: tuple[dict[str, Any], ...] = ()
+    sample: int | None = None
+    seed: int = 0
+    description: str = ""
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        unknown = set(self.base) - set(TABLES)
+        if unknown:
+            raise InputError(f"unknown base table(s) {sorted(unknown)}; a base has "
+                             f"{', '.join(TABLES)}")
+        for key, values in self.parameters.items():
+            _check_key(key)
+            if isinstance(values, Range):
+                if key == "design.panels":
+                    raise InputError("[sweep] design.panels takes a list of sizes, not a range")
+                if self.sample is None:
+                    raise InputError(f"[sweep] {key} is a range {{low, high}}, which only "
+                                     "sample = K draws from; give a list of values for a grid")
+            elif not isinstance(values, (list, tuple)) or not values:
+                raise InputError(f"[sweep] {key} must be a non-empty list of values (or "
+                                 f"{{low, high}} with sample = K), got {values!r}; put a "
+                                 f"fixed setting in the [{key.split('.')[0]}] table instead")
+        object.__setattr__(self, "parameters", {k: v if isinstance(v, Range) else list(v)
+                                                for k, v in self.parameters.items()})
+        object.__setattr__(self, "cases", tuple(dict(c) for c in self.cases))
+        for i, case in enumerate(self.cases):
+            for key in case:
+                if key == "name":
+                    continue
+                _check_key(key, f"[[sweep.cases]] #{i + 1}")
+                if key in self.parameters:
+                    raise InputError(f"{key} is both a [sweep] parameter and set by "
+                                     f"[[sweep.cases]] #{i + 1}; keep one")
+        if self.sample is not None and (isinstance(self.sample, bool)
+                                        or not isinstance(self.sample, int) or self.sample < 1):
+            raise InputError(f"[sweep] sample must be a whole number >= 1, got {self.sample!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise InputError(f"[sweep] seed must be a whole number >= 0, got {self.seed!r}")
+
+    # -------------------------------------------------------------- loading
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Study":
+        """A study from its TOML file; ``base`` paths are relative to the file."""
+        path = Path(path)
+        try:
+            with open(path, "rb") as fh:
+                config = tomllib.load(fh)
+        except FileNotFoundError:
+            raise InputError(f"no such study file: {path}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{path} is not valid TOML: {exc}") from None
+        try:
+            return replace(cls.from_config(config, root=path.parent), source=str(path))
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any], root: str | os.PathLike = ".") -> "Study":
+        """A study from the tables of a study file (``base`` relative to ``root``)."""
+        unknown = set(config) - set(STUDY_KEYS)
+        if unknown:
+            raise InputError(f"unknown study key(s) {sorted(unknown)}; a study file has "
+                             f"{', '.join(STUDY_KEYS)}")
+        base: dict[str, dict] = {table: {} for table in TABLES}
+        if "base" in config:
+            base_path = Path(root) / str(config["base"])
+            try:
+                with open(base_path, "rb") as fh:
+                    base_file = tomllib.load(fh)
+            except FileNotFoundError:
+                raise InputError(f"base = {config['base']!r}: no such design file "
+                                 f"{base_path} (paths are relative to the study file)") from None
+            except tomllib.TOMLDecodeError as exc:
+                raise InputError(f"base file {base_path} is not valid TOML: {exc}") from None
+            extra = set(base_file) - {"target", "design"}
+            if extra:
+                raise InputError(f"base file {base_path} has table(s) {sorted(extra)}; a "
+                                 "design file has [target] and [design]")
+            for table in ("target", "design"):
+                base[table].update(base_file.get(table, {}))
+        for table in TABLES:
+            inline = config.get(table, {})
+            if not isinstance(inline, dict):
+                raise InputError(f"{table} must be a table, got {inline!r}")
+            if table == "target" and ("name" in inline or "python" in inline):
+                base["target"] = {}
+            base[table].update(inline)
+        spec = config.get("sweep", {})
+        if not isinstance(spec, dict):
+            raise InputError(f"sweep must be a table, got {spec!r}")
+        spec = dict(spec)
+        cases = spec.pop("cases", [])
+        if not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
+            raise InputError("sweep.cases must be an array of tables: [[sweep.cases]]")
+        sample = spec.pop("sample", None)
+        seed = spec.pop("seed", None)
+        if seed is not None and sample is None:
+            raise InputError("[sweep] seed only seeds sample = K; for the seed of the multistart "
+                             "perturbations set solve.seed (or sweep \"solve.seed\" = [...])")
+        parameters = {key: _range_or_list(key, value) for key, value in _dotted(spec, "[sweep]")}
+        named_cases = []
+        for i, case in enumerate(cases):
+            case = dict(case)
+            name = case.pop("name", None)
+            flat = dict(_dotted(case, f"[[sweep.cases]] #{i + 1}"))
+            if name is not None:
+                flat["name"] = str(name)
+            named_cases.append(flat)
+        return cls(base=base, parameters=parameters, cases=tuple(named_cases), sample=sample,
+                   seed=0 if seed is None else seed,
+                   description=str(config.get("description", "")))
+
+    # -------------------------------------------------------------- expansion
+    @property
+    def swept(self) -> list[str]:
+        """The varied keys, cases' keys first, in the order given."""
+        keys = [k for case in self.cases for k in case if k != "name"]
+        return list(dict.fromkeys(keys + list(self.parameters)))
+
+    def points(self) -> list[tuple[str | None, dict[str, Any]]]:
+        """The overrides of each design: (case name or None, dotted key -> value), the grid
+        (cases x product of the lists) or ``sample`` random draws."""
+        cases = list(self.cases) or [{}]
+        keys = list(self.parameters)
+        if self.sample is None or not any(isinstance(v, Range) for v in self.parameters.values()):
+            grid = [(case, dict(zip(keys, combo))) for case in cases
+                    for combo in itertools.product(*(self.parameters[k] for k in keys))]
+            if self.sample is not None:
+                if self.sample > len(grid):
+                    raise InputError(f"[sweep] sample = {self.sample} but the grid has only "
+                                     f"{len(grid)} designs; drop sample to run them all")
+                rng = np.random.default_rng(self.seed)
+                grid = [grid[int(i)] for i in rng.choice(len(grid), self.sample, replace=False)]
+        else:
+            rng = np.random.default_rng(self.seed)
+            grid, drawn = [], set()
+            for _ in range(100 * self.sample):
+                case = cases[int(rng.integers(len(cases)))]
+                values = {k: v.draw(rng, k in INTEGER_KEYS) if isinstance(v, Range)
+                          else v[int(rng.integers(len(v)))] for k, v in self.parameters.items()}
+                key = _canonical([case, values])
+                if key not in drawn:
+                    drawn.add(key)
+                    grid.append((case, values))
+                if len(grid) == self.sample:
+                    break
+            else:
+                raise InputError(f"[sweep] sample = {self.sample}: only {len(grid)} distinct "
+                                 f"designs in {100 * self.sample} draws; widen the ranges or "
+                                 "lower sample")
+        return [(case.get("name"), {**{k: v for k, v in case.items() if k != "name"}, **values})
+                for case, values in grid]
+
+    def designs(self) -> list[Design]:
+        """Every design of the study, each validated (an invalid combination raises
+        :class:`InputError` naming the design); two designs that are the same problem raise."""
+        try:
+            return self._designs()
+        except InputError as exc:
+            if not self.source:
+                raise
+            raise InputError(f"{self.source}: {exc}") from None
+
+    def _designs(self) -> list[Design]:
+        designs: list[Design] = []
+        seen: dict[str, str] = {}
+        short = _short_names(self.swept)
+        for case, overrides in self.points():
+            label = " ".join(f"{short[k]}={_label(v)}" for k, v in overrides.items()
+                             if case is None or k in self.parameters)
+            name = " ".join(p for p in (case, label) if p) or "base"
+            config = design_config(self.base, overrides, name)
+            design = Design(id=design_id(config), name=name, params=overrides, config=config,
+                            case=case or "")
+            if design.id in seen:
+                raise InputError(f"designs {seen[design.id]!r} and {name!r} are the same problem "
+                                 f"(id {design.id}); remove the duplicate value")
+            seen[design.id] = name
+            designs.append(design)
+        return designs
+
+
+def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
+                  name: str = "design") -> dict[str, Any]:
+    """The full configuration {"target", "design", "solve"} of ``base`` with the dotted
+    ``overrides`` applied, every default filled in (via :class:`DesignProblem`), validated.
+
+    Setting target.name or target.python starts the target table afresh; an integer p as
+    design.panels means (p, p).
+    """
+    tables = {table: dict(base.get(table, {})) for table in TABLES}
+    if "target.name" in overrides or "target.python" in overrides:
+        tables["target"] = {}
+    for key, value in overrides.items():
+        table, item = key.split(".", 1)
+        tables[table][item] = value
+    panels = tables["design"].get("panels")
+    if isinstance(panels, int) and not isinstance(panels, bool):
+        tables["design"]["panels"] = [panels, panels]
+    try:
+        problem = DesignProblem.from_config({"target": tables["target"],
+                                             "design": tables["design"]})
+        solve = _solve_settings(tables["solve"])
+    except InputError as exc:
+        raise InputError(f"design {name!r}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"design {name!r}: bad value ({type(exc).__name__}: {exc})") from None
+    return {**problem.to_config(), "solve": solve}
+
+
+def design_id(config: Mapping[str, Any]) -> str:
+    """12 hex digits of the SHA-256 of the canonical JSON of ``config`` (keys sorted,
+    integers as floats, so 4 and 4.0 give the same id)."""
+    return hashlib.sha256(_canonical(config).encode()).hexdigest()[:12]
+
+
+# --------------------------------------------------------------------------- one design
+def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
+    """Solve one design: the task of every run, on a Dask worker or in this process.
+
+    ``payload`` is :meth:`Design.payload`. Returns {"row": outcome columns, "result":
+    DesignResult.to_dict() or None}. Never raises an :class:`Exception`: an infeasible
+    design gives status "infeasible", a solver failure "failed" (with IPOPT's status), any
+    other exception "error" with its type and message as the reason.
+
+    The solve runs with one thread in every BLAS and OpenMP pool (:func:`_one_thread`):
+    wherever a design runs it then gives the same numbers, and workers sharing a machine do
+    not oversubscribe it.
+    """
+    t0 = time.perf_counter()
+    config = payload["config"]
+    row: dict[str, Any] = {"worker": _worker_name(), "host": socket.gethostname()}
+    result = None
+    try:
+        problem = DesignProblem.from_config({"target": config["target"],
+                                             "design": config["design"]})
+        with _one_thread():
+            result = problem.solve(**config["solve"])
+    except InfeasibleDesign as exc:
+        row.update(status="infeasible", solver_status="Infeasible_Problem_Detected",
+                   reason=_one_line(exc))
+    except SolverFailed as exc:
+        row.update(status="failed", solver_status=exc.status, reason=_one_line(exc),
+                   **_stat_columns(exc.stats))
+    except Exception as exc:  # a task turns every failure into a row
+        row.update(status="error", solver_status="",
+                   reason=f"{type(exc).__name__}: {_one_line(exc)}")
+    else:
+        fit = {k: float(result.fit[k]) for k in FIT_COLUMNS}
+        bad = [k for k, v in fit.items() if not math.isfinite(v)]
+        if bad:
+            row.update(status="error", solver_status=result.stats["status"],
+                       reason=f"non-finite fit measure(s) {', '.join(bad)} of a solved design")
+            result = None
+        else:
+            row.update(status="solved", solver_status=result.stats["status"], reason="", **fit,
+                       **_stat_columns(result.stats),
+                       start=result.stats.get("multistart", {}).get("chosen", 0))
+    row["time"] = time.perf_counter() - t0
+    return {"row": row, "result": None if result is None else result.to_dict()}
+
+
+def _stat_columns(stats: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: stats[k] for k in ("iterations", "build_time", "solve_time") if k in stats}
+
+
+def _one_thread() -> AbstractContextManager:
+    """Limit every BLAS and OpenMP thread pool of this process to one thread (threadpoolctl),
+    CasADi's own OpenBLAS under MUMPS included: threadpoolctl does not know that library by
+    name, so it is registered here, and IPOPT's plugin is loaded first (``has_nlpsol`` loads
+    it, silently when it already is) so that the library is found.
+
+    The thread count of that OpenBLAS changes IPOPT's path in the last digits (measured: 80
+    against 82 iterations, RMS differing by 5e-6 relative, on an 8 x 8 sphere cap), so
+    without the limit a serial run would not reproduce a cluster run's table.
+    """
+    import casadi
+    from threadpoolctl import threadpool_limits
+
+    _register_casadi_openblas()
+    casadi.has_nlpsol("ipopt")
+    return threadpool_limits(limits=1)
+
+
+@functools.cache
+def _register_casadi_openblas() -> None:
+    from threadpoolctl import OpenBLASController, register
+
+    class CasadiOpenBLAS(OpenBLASController):
+        """The OpenBLAS that CasADi ships for its MUMPS (libcasadi-tp-openblas)."""
+
+        filename_prefixes = ("libcasadi-tp-openblas",)
+
+    register(CasadiOpenBLAS)
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return "in-process"
+
+
+# --------------------------------------------------------------------------- running
+Task = Callable[[Mapping[str, Any]], dict[str, Any]]
+
+
+def run(study: Study | str | os.PathLike, out: str | os.PathLike,
+        scheduler: "str | Client | None" = None, workers: int = 2, progress: bool = True,
+        worker_retries: int = 2, task: Task = solve_design,
+        console: "Console | None" = None) -> "pd.DataFrame":
+    """Run every design of ``study`` (a :class:`Study` or its TOML file) into ``out``.
+
+    ``scheduler``: None or "local" for a LocalCluster of ``workers`` single-threaded worker
+    processes; "none" to solve serially in this process; a scheduler address
+    ("tcp://host:8786") or a :class:`distributed.Client` to use an existing cluster (its
+    workers must import rffqm_nlp). At most one design per worker thread is in flight, so a
+    dying worker takes no queued design with it; a design whose worker died is submitted
+    again up to ``worker_retries`` times (on the local cluster Dask reports every death at
+    once; an existing cluster first retries by its own allowed-failures setting).
+
+    Designs already complete in ``out`` are skipped; see the module docstring for the
+    files. ``progress`` shows a rich progress bar (and the Dask dashboard address when the
+    cluster serves one) on ``console`` (default: stderr). ``task`` replaces
+    :func:`solve_design` (same payload and return value), e.g. to inject failures in tests.
+    Returns the table, one row per design in study order.
+    """
+    from rich.console import Console
+
+    if not isinstance(study, Study):
+        study = Study.load(study)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    if isinstance(worker_retries, bool) or not isinstance(worker_retries, int) \
+            or worker_retries < 0:
+        raise InputError(f"worker_retries must be a whole number >= 0, got {worker_retries!r}")
+    _require_extra(serial=scheduler == "none")
+    console = console or Console(stderr=True)
+    designs = study.designs()
+    out = Path(out)
+    rows: dict[str, dict[str, Any]] = {}
+    pending: list[Design] = []
+    for design in designs:
+        row = completed_row(out / DESIGNS_DIR / design.id, design)
+        if row is None:
+            shutil.rmtree(out / DESIGNS_DIR / design.id, ignore_errors=True)
+            pending.append(design)
+        else:
+            rows[design.id] = row
+    (out / DESIGNS_DIR).mkdir(parents=True, exist_ok=True)
+    if rows:
+        write_table(out, study, designs, rows)
+    if progress and rows:
+        console.print(f"{len(rows)} of {len(designs)} designs already complete in {out}",
+                      highlight=False)
+
+    def finish(design: Design, outcome: Mapping[str, Any]) -> None:
+        rows[design.id] = save_outcome(out / DESIGNS_DIR / design.id, design, outcome)
+        write_table(out, study, designs, rows)
+
+    if pending:
+        with _progress(progress, console, len(designs), len(rows)) as advance:
+            if scheduler == "none":
+                for design in pending:
+                    finish(design, task(design.payload()))
+                    advance(design, rows[design.id])
+            else:
+                with _client(scheduler, workers) as client:
+                    if progress:
+                        _announce(client, console)
+                    for design, outcome in _stream(client, pending, task, worker_retries):
+                        finish(design, outcome)
+                        advance(design, rows[design.id])
+    return table(study, designs, rows)
+
+
+def _stream(client: "Client", designs: Iterable[Design], task: Task,
+            worker_retries: int) -> Iterator[tuple[Design, dict[str, Any]]]:
+    """Submit the designs, at most one per worker thread at a time, and yield each
+    (design, outcome) as it finishes. A design whose worker died (KilledWorker) goes to the
+    front of the queue again, up to ``worker_retries`` times, and then yields status
+    "worker_lost"; an error inside Dask itself yields status "error"."""
+    from distributed import KilledWorker, as_completed
+
+    queue = deque(designs)
+    tries: dict[str, int] = {}
+    by_key: dict[str, Design] = {}
+    finished = as_completed()
+
+    def top_up() -> None:
+        """Submit designs until every live worker thread (at least one) has one."""
+        capacity = max(1, sum(client.nthreads().values()))
+        while queue and len(by_key) < capacity:
+            design = queue.popleft()
+            tries[design.id] = tries.get(design.id, 0) + 1
+            future = client.submit(task, design.payload(), pure=False)
+            by_key[future.key] = design
+            finished.add(future)
+
+    top_up()
+    for future in finished:
+        design = by_key.pop(future.key)
+        try:
+            outcome = future.result()
+        except KilledWorker as exc:
+            if tries[design.id] <= worker_retries:
+                queue.appendleft(design)
+                outcome = None
+            else:
+                outcome = {"row": {"status": "worker_lost", "solver_status": "",
+                                   "reason": f"its worker process died on each of its "
+                                             f"{tries[design.id]} tries ({_one_line(exc)})"},
+                           "result": None}
+        except Exception as exc:  # never lose a row to an error outside the task
+            outcome = {"row": {"status": "error", "solver_status": "",
+                               "reason": f"{type(exc).__name__}: {_one_line(exc)}"},
+                       "result": None}
+        future.release()
+        top_up()
+        if outcome is not None:
+            yield design, outcome
+
+
+@contextmanager
+def _client(scheduler: "str | Client | None", workers: int) -> Iterator["Client"]:
+    """A Dask client: of a new LocalCluster (None, "local") that reports a task whose worker
+    died at once (allowed-failures 0) and does not profile, of the scheduler at an address,
+    or the given client (left open)."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    if isinstance(scheduler, Client):
+        yield scheduler
+        return
+    if scheduler in (None, "local"):
+        try:
+            # the workers' statistical profiler costs 20-40% of a design's time (measured)
+            with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                                  "distributed.worker.profile.enabled": False}):
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                       processes=True, dashboard_address=":0",
+                                       silence_logs=logging.ERROR, env=WORKER_ENV)
+        except RuntimeError as exc:
+            raise RffqmError(f"could not start a local Dask cluster ({_one_line(exc)}); a "
+                             "script that runs a sweep must call it under `if __name__ == "
+                             "\"__main__\":` (worker processes import the script)") from exc
+        with cluster, Client(cluster) as client:
+            yield client
+        return
+    if not isinstance(scheduler, str):
+        raise InputError(f"scheduler must be None, 'local', 'none', an address or a "
+                         f"distributed.Client, got {scheduler!r}")
+    try:
+        client = Client(scheduler, timeout=10)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot connect to the Dask scheduler at {scheduler!r} "
+                         f"({_one_line(exc)}); start one with `dask scheduler`, or use "
+                         "--scheduler local (a cluster on this machine) or none") from None
+    with client:
+        yield client
+
+
+def _announce(client: "Client", console: "Console") -> None:
+    """Print the cluster's size and its dashboard address (when it serves one)."""
+    info = client.scheduler_info()
+    threads = client.nthreads()
+    console.print(f"Dask scheduler {info.get('address', '?')}: {len(threads)} workers, "
+                  f"{sum(threads.values())} threads", highlight=False)
+    if "dashboard" in info.get("services", {}):
+        console.print(f"dashboard: {client.dashboard_link}", highlight=False)
+
+
+@contextmanager
+def _progress(enabled: bool, console: "Console", total: int,
+              done: int) -> Iterator[Callable[[Design, Mapping[str, Any]], None]]:
+    """Progress over designs; yields ``advance(design, row)``. On a terminal a rich
+    progress bar with the count of each status; elsewhere (a log file) one line per
+    finished design."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                               TimeElapsedColumn, TimeRemainingColumn)
+
+    counts: dict[str, int] = {}
+    live = enabled and console.is_terminal
+    columns = (TextColumn("[bold]designs"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[counts]}"))
+    with Progress(*columns, console=console, disable=not live) as bar:
+        task_id = bar.add_task("designs", total=total, completed=done, counts="")
+
+        def advance(design: Design, row: Mapping[str, Any]) -> None:
+            counts[row["status"]] = counts.get(row["status"], 0) + 1
+            bar.update(task_id, advance=1,
+                       counts=", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+            if enabled and not live:
+                fit = "" if row.get("rms") is None else f", RMS {row['rms']:.3e}"
+                seconds = "" if row.get("time") is None else f", {row['time']:.1f} s"
+                console.print(f"[{done + sum(counts.values())}/{total}] {design.name} "
+                              f"({design.id}): {row['status']}{fit}{seconds}",
+                              highlight=False, markup=False)
+
+        yield advance
+
+
+# --------------------------------------------------------------------------- files
+def save_outcome(folder: Path, design: Design, outcome: Mapping[str, Any]) -> dict[str, Any]:
+    """Write a design's folder (result.json when solved, then row.json) and return its
+    table row."""
+    folder.mkdir(parents=True, exist_ok=True)
+    row = {column: outcome["row"].get(column) for column in OUTCOME_COLUMNS}
+    if outcome.get("result") is not None:
+        DesignResult.from_dict(outcome["result"]).save(folder)
+    record = {"format": ROW_FORMAT, "version": ROW_VERSION, "id": design.id,
+              "name": design.name, "config": design.config, "row": row}
+    with atomic_path(folder / ROW_FILE) as tmp:
+        tmp.write_text(json.dumps(record, allow_nan=False))
+    return row
+
+
+def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
+    """The saved row of ``design`` if its folder holds a complete, valid outcome of exactly
+    this design: row.json of this id and configuration with a final status, and for a
+    solved design a loadable result.json of the same problem and fit. Otherwise None."""
+    try:
+        record = json.loads((folder / ROW_FILE).read_text())
+        if (record.get("format") != ROW_FORMAT or record.get("version") != ROW_VERSION
+                or record.get("id") != design.id or design_id(record["config"]) != design.id):
+            return None
+        row = {column: record["row"][column] for column in OUTCOME_COLUMNS}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    if row["status"] not in FINAL_STATUSES:
+        return None
+    if row["status"] == "solved":
+        try:
+            result = DesignResult.load(folder)
+        except (RffqmError, OSError, KeyError, TypeError, ValueError, AttributeError):
+            return None
+        problem = {k: design.config[k] for k in ("target", "design")}
+        N, M = design.config["design"]["panels"]
+        if (_canonical(result.problem) != _canonical(problem)
+                or result.folded.shape != (N + 1, M + 1, 3)
+                or any(result.fit.get(k) != row[k] for k in FIT_COLUMNS)):
+            return None
+    return row
+
+
+def table(study: Study, designs: list[Design], rows: Mapping[str, Mapping[str, Any]]
+          ) -> "pd.DataFrame":
+    """The results table: one row per finished design, in study order; columns id, name,
+    case (when the study has cases), the swept keys, then :data:`OUTCOME_COLUMNS`."""
+    import pandas as pd
+
+    swept = study.swept
+    records = []
+    for design in designs:
+        if design.id not in rows:
+            continue
+        record: dict[str, Any] = {"id": design.id, "name": design.name}
+        if study.cases:
+            record["case"] = design.case
+        record.update({key: _cell(design.params.get(key)) for key in swept})
+        record.update(rows[design.id])
+        records.append(record)
+    columns = ["id", "name", *(["case"] if study.cases else []), *swept, *OUTCOME_COLUMNS]
+    frame = pd.DataFrame.from_records(records, columns=columns)
+    for key in swept:
+        frame[key] = _homogeneous(frame[key])
+    for column in FIT_COLUMNS + ("build_time", "solve_time", "time"):
+        frame[column] = frame[column].astype("float64")
+    for column in ("iterations", "start"):
+        frame[column] = frame[column].astype("Int64")
+    return frame
+
+
+def write_table(out: Path, study: Study, designs: list[Design],
+                rows: Mapping[str, Mapping[str, Any]]) -> "pd.DataFrame":
+    """Write results.parquet and results.csv into ``out`` atomically; return the table."""
+    frame = table(study, designs, rows)
+    with atomic_path(out / f"{TABLE_NAME}.parquet") as tmp:
+        frame.to_parquet(tmp, index=False)
+    with atomic_path(out / f"{TABLE_NAME}.csv") as tmp:
+        frame.to_csv(tmp, index=False)
+    return frame
+
+
+# --------------------------------------------------------------------------- helpers
+def _require_extra(serial: bool) -> None:
+    """Raise with the install command when the ``sweep`` extra's packages are missing."""
+    needed = ("pandas", "pyarrow", "threadpoolctl") + (() if serial else ("distributed",))
+    missing = [name for name in needed if importlib.util.find_spec(name) is None]
+    if missing:
+        raise RffqmError(f"sweeps need {', '.join(missing)}: pip install 'rffqm_nlp[sweep]'")
+
+
+def _check_key(key: str, where: str = "[sweep]") -> None:
+    table, _, item = key.partition(".")
+    if table not in TABLES or not item or "." in item:
+        raise InputError(f"{where}: {key!r} is not a parameter; name one as "
+                         f"\"<table>.<key>\" with table one of {', '.join(TABLES)} (e.g. "
+                         "\"target.radius\", \"design.panels\", \"solve.seed\")")
+    if table == "design" and item not in DesignProblem.__dataclass_fields__:
+        known = sorted(set(DesignProblem.__dataclass_fields__) - {"target"})
+        raise InputError(f"{where}: unknown design key {item!r}; known: {', '.join(known)}")
+    if table == "solve" and item not in SOLVE_DEFAULTS:
+        raise InputError(f"{where}: unknown solve key {item!r}; known: "
+                         f"{', '.join(SOLVE_DEFAULTS)}")
+
+
+def _dotted(table: Mapping[str, Any], where: str) -> Iterator[tuple[str, Any]]:
+    """(dotted key, value) of a [sweep] or case table, accepting both "target.radius" = ...
+    and the nested form TOML makes of an unquoted target.radius = ..."""
+    for key, value in table.items():
+        if "." in key:
+            yield key, value
+        elif key in TABLES and isinstance(value, dict):
+            for item, inner in value.items():
+                yield f"{key}.{item}", inner
+        else:
+            raise InputError(f"{where}: {key!r} is not a parameter; name one as "
+                             f"\"<table>.<key>\" with table one of {', '.join(TABLES)}"
+                             + (f" (controls: {', '.join(SWEEP_CONTROLS)})"
+                                if where == "[sweep]" else ""))
+
+
+def _range_or_list(key: str, value: Any) -> list | Range:
+    if isinstance(value, dict):
+        if not {"low", "high"} <= set(value) <= set(RANGE_KEYS):
+            raise InputError(f"[sweep] {key} = {value!r}: a range is {{low = a, high = b}} "
+                             "(optionally log = true); to sweep tables give a list of them")
+        try:
+            return Range(**value)
+        except InputError as exc:
+            raise InputError(f"[sweep] {key}: {exc}") from None
+    return value
+
+
+def _solve_settings(table: Mapping[str, Any]) -> dict[str, int]:
+    unknown = set(table) - set(SOLVE_DEFAULTS)
+    if unknown:
+        raise InputError(f"unknown [solve] key(s) {sorted(unknown)}; known: "
+                         f"{', '.join(SOLVE_DEFAULTS)}")
+    settings = {**SOLVE_DEFAULTS, **table}
+    if isinstance(settings["multistart"], bool) or not isinstance(settings["multistart"], int) \
+            or settings["multistart"] < 1:
+        raise InputError(f"solve.multistart must be a whole number >= 1, got "
+                         f"{settings['multistart']!r}")
+    if isinstance(settings["seed"], bool) or not isinstance(settings["seed"], int) \
+            or settings["seed"] < 0:
+        raise InputError(f"solve.seed must be a whole number >= 0, got {settings['seed']!r}")
+    return settings
+
+
+def _short_names(keys: list[str]) -> dict[str, str]:
+    """Each dotted key by its last part, or whole where two keys share the last part."""
+    last = [k.split(".", 1)[1] for k in keys]
+    return {k: (s if last.count(s) == 1 else k) for k, s in zip(keys, last)}
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list) and value and all(_is_number(v) for v in value):
+        return "x".join(_label(v) for v in value)
+    if isinstance(value, (list, dict)):
+        return json.dumps(value, separators=(",", ":"))
+    return str(value)
+
+
+def _cell(value: Any) -> Any:
+    """A table cell: numbers, strings and booleans as they are, others as compact JSON."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return json.dumps(value, separators=(",", ":"))
+
+
+def _homogeneous(column: "pd.Series") -> "pd.Series":
+    """A swept column of one type (Parquet needs it): numbers as floats when ints and floats
+    mix, everything as text when other types mix."""
+    kinds = {type(v) for v in column if v is not None}
+    if kinds <= {int, float} and len(kinds) > 1:
+        return column.astype("float64")
+    if len(kinds) > 1:
+        return column.map(lambda v: v if v is None or isinstance(v, str) else json.dumps(v))
+    return column
+
+
+def _canonical(config: Any) -> str:
+    def norm(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {str(k): norm(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [norm(x) for x in v]
+        if isinstance(v, int) and not isinstance(v, bool):
+            return float(v)
+        return v
+
+    return json.dumps(norm(config), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
