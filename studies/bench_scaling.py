@@ -1,0 +1,92 @@
+"""Scaling of the two transcriptions: time, iterations and peak memory against pattern size.
+
+The sphere cap (targets/sphere_cap.toml, stop_rms=None, default options) at n x n panels,
+each (size, transcription) solved by ``DesignProblem.solve()`` in a fresh subprocess
+(``bench_inverse.run_child``) so its time and peak memory are its own. Runs above
+``--limit-from`` panels get an IPOPT wall-time limit of ``--time-limit`` seconds; a run that
+hits it is reported with its status, not dropped. The ratio column compares each
+simultaneous run with the sequential run of the same size in the same run of this script.
+
+    python studies/bench_scaling.py [--sizes 10 20 40] [--simultaneous-only 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from bench_inverse import run_child
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def row(r: dict, ratio: str) -> str:
+    fit = r.get("fit") or {}
+    rms = f"{100 * fit['rms']:.2f}%" if "rms" in fit else "-"
+    return (f"| {r['n']}x{r['n']} | {r['transcription']} | {r['wall']:.1f} | "
+            f"{r['build_time']:.1f} | {r['iterations']} | {r['status']} | "
+            f"{r['objective']:.6g} | {rms} | {r['peak_rss_mb']:.0f} | {ratio} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="*", default=[10, 20, 40])
+    ap.add_argument("--simultaneous-only", type=int, nargs="*", default=[100])
+    ap.add_argument("--time-limit", type=float, default=300.0)
+    ap.add_argument("--limit-from", type=int, default=40)
+    ap.add_argument("--out", type=Path,
+                    default=ROOT / "studies" / "results" / "bench_scaling.md")
+    args = ap.parse_args()
+    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    rows = []
+    runs = [(n, tr) for n in args.sizes for tr in ("sequential", "simultaneous")]
+    runs += [(n, "simultaneous") for n in args.simultaneous_only]
+    wall: dict[int, float] = {}
+    for n, tr in runs:
+        limit = args.time_limit if n >= args.limit_from else None
+        print(f"== {n}x{n} {tr} (time limit {limit}) ...", flush=True)
+        try:
+            r = run_child(n, tr, time_limit=limit)
+        except RuntimeError as exc:  # the child failed outside IPOPT (error in its stderr)
+            rows.append(f"| {n}x{n} | {tr} | failed: {str(exc).splitlines()[-1][:200]} |")
+            print(rows[-1], flush=True)
+            continue
+        ok = r["success"]
+        if tr == "sequential" and ok:
+            wall[n] = r["wall"]
+        ratio = (f"{wall[n] / r['wall']:.2f}x" if tr == "simultaneous" and ok and n in wall
+                 else "-")
+        rows.append(row(r, ratio))
+        print(rows[-1], flush=True)
+    md = [
+        "# Transcription scaling (`studies/bench_scaling.py`)",
+        "",
+        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} CPUs; "
+        f"NumPy {np.__version__}, CasADi {ca.__version__}; load average (1 min) {load0:.1f} at "
+        f"start, {os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        "- problem: targets/sphere_cap.toml at n x n panels, stop_rms=None, default options "
+        "(exact Hessian; sequential: SX derivatives up to 12 x 12 panels, MX above; "
+        "simultaneous: SX); one fresh subprocess per run",
+        f"- IPOPT wall-time limit {args.time_limit:.0f} s for n >= {args.limit_from}",
+        "- wall = seconds of `prob.solve()` (start, build, solve, NumPy re-march, fit); "
+        "peak RSS = VmHWM of the run's own process; speed-up = sequential wall / "
+        "simultaneous wall at the same size",
+        "",
+        "| panels | transcription | wall [s] | build [s] | iterations | status | objective "
+        "| RMS/diam | peak RSS [MB] | speed-up vs sequential |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+    ]
+    args.out.write_text("\n".join(md))
+    print("\n".join(md))
+
+
+if __name__ == "__main__":
+    main()
