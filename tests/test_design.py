@@ -80,22 +80,30 @@ def test_start_matches_target_spacing():
     np.testing.assert_allclose(mine, theirs, rtol=1e-12)
 
 
-def test_nlp_derivatives_match_finite_differences():
-    prob = small("hyperboloid")
-    nlp = prob.transcribe()
+@pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
+def test_nlp_derivatives_match_finite_differences(transcription):
+    """Gradient, constraint Jacobian and the Hessian of the Lagrangian IPOPT uses."""
+    nlp = small("hyperboloid", transcription=transcription).transcribe()
     f = 0.5 * ca.sumsqr(nlp.residuals)
-    F = ca.Function("F", [nlp.x], [f, ca.gradient(f, nlp.x), nlp.g, ca.jacobian(nlp.g, nlp.x)])
+    lam = ca.MX.sym("lam", nlp.g.numel())
+    lagrangian_grad = ca.gradient(f + ca.dot(lam, nlp.g), nlp.x)
+    F = ca.Function("F", [nlp.x, lam], [f, ca.gradient(f, nlp.x), nlp.g,
+                                        ca.jacobian(nlp.g, nlp.x), lagrangian_grad,
+                                        ca.jacobian(lagrangian_grad, nlp.x)])
     rng = np.random.default_rng(1)
     x0 = nlp.x0 + 1e-3 * rng.normal(size=nlp.x0.size)
-    _, grad, _, jac = (np.array(v.full()) for v in F(x0))
+    mult = rng.normal(size=nlp.g.numel())
+    _, grad, _, jac, _, hess = (np.array(v.full()) for v in F(x0, mult))
     h = 1e-6
     for _ in range(3):
         d = rng.normal(size=x0.size)
-        fp, _, gp, _ = F(x0 + h * d)
-        fm, _, gm, _ = F(x0 - h * d)
+        fp, _, gp, _, lp, _ = F(x0 + h * d, mult)
+        fm, _, gm, _, lm, _ = F(x0 - h * d, mult)
         assert float((fp - fm) / (2 * h)) == pytest.approx(float(grad.ravel() @ d), rel=1e-6)
-        fd = ((gp - gm).full().ravel()) / (2 * h)
-        np.testing.assert_allclose(fd, jac @ d, rtol=1e-6, atol=1e-6 * np.abs(jac @ d).max())
+        for plus, minus, exact in ((gp, gm, jac @ d), (lp, lm, hess @ d)):
+            fd = (plus - minus).full().ravel() / (2 * h)
+            np.testing.assert_allclose(fd, exact.ravel(), rtol=1e-5,
+                                       atol=1e-6 * np.abs(exact).max())
 
 
 def test_forced_failure_raises_solver_failed_with_status():
