@@ -573,7 +573,8 @@ def _multistart(problem: DesignProblem, starts: int, seed: int,
         if not failed:
             raise InfeasibleDesign(message) from errors[0]
         raise SolverFailed(message, status=failed[0].status, stats=failed[0].stats,
-                           last_iterate=failed[0].last_iterate) from failed[0]
+                           last_iterate=failed[0].last_iterate,
+                           best_iterate=failed[0].best_iterate) from failed[0]
     chosen, res = best
     stats = dict(res.stats, multistart={"starts": starts, "seed": seed, "chosen": chosen,
                                         "time": time.perf_counter() - t0, "runs": runs})
