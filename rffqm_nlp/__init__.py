@@ -18,16 +18,18 @@ from .design import DesignProblem
 from .results import DesignResult
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
-               "shape", "design", "transcription", "results", "io", "viz", "cli", "sweep")
+               "shape", "design", "transcription", "results", "io", "viz", "cli", "sweeps")
 
 
 def __getattr__(name: str):
     if name in _SUBMODULES:
         return importlib.import_module(f".{name}", __name__)
+    if name == "sweep":  # rq.sweep(study, out, ...): rffqm_nlp.sweeps.run, imported on use
+        return importlib.import_module(".sweeps", __name__).run
     raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
 
 
 __all__ = ["BoundaryData", "BoundaryDataError", "DesignProblem", "DesignResult",
            "InfeasibleDesign", "InputError", "MarchingError", "Pattern", "RffqmError",
            "SolverFailed", "SurfaceError", "fold", "march", "miura_boundary", "perturb_angles",
-           *_SUBMODULES]
+           "sweep", *_SUBMODULES]

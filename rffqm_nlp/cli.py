@@ -2,7 +2,7 @@
 
 Commands: ``design`` (inverse design of a TOML target, with live IPOPT progress), ``sweep``
 (a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
-serially; resumable; see :mod:`rffqm_nlp.sweep`), ``fold``, ``export`` and ``render`` (of a
+serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export`` and ``render`` (of a
 saved design result), ``targets`` (the built-in surfaces) and ``march`` (forward marching of
 a perturbed Miura-ori).
 
@@ -410,7 +410,7 @@ def sweep_cmd(
     reason; the command still succeeds. Re-running into OUT skips finished designs and
     recomputes broken or missing ones.
     """
-    from .sweep import run
+    from .sweeps import run
 
     with user_errors():
         check_out_dir(out, force=True)

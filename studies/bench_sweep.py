@@ -24,18 +24,18 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from rffqm_nlp import sweep
+from rffqm_nlp import sweeps
 
 ROOT = Path(__file__).resolve().parent.parent
 RADII = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)
 HALF_SIDE = 1.6
 
 
-def study() -> sweep.Study:
+def study() -> sweeps.Study:
     """The 32 designs: 8 radii (cases with their domains) x 2 layouts x 2 pattern sizes."""
     cases = [{"name": f"R={R:g}", "target.radius": R,
               "target.domain": [[-HALF_SIDE / R, HALF_SIDE / R]] * 2} for R in RADII]
-    return sweep.Study(base={"target": {"name": "sphere_cap"},
+    return sweeps.Study(base={"target": {"name": "sphere_cap"},
                              "design": {"stop_rms": None, "max_iter": 500}},
                        parameters={"design.layout": ["zigzag_i", "zigzag_j"],
                                    "design.panels": [6, 8]},
@@ -60,7 +60,7 @@ def timed(scheduler: str, workers: int, out: Path) -> dict:
     ``scheduler`` into the emptied folder ``out``."""
     shutil.rmtree(out, ignore_errors=True)
     t0, cpu0, busy0 = time.perf_counter(), own_cpu(), machine_busy()
-    frame = sweep.run(study(), out, scheduler=scheduler, workers=workers)
+    frame = sweeps.run(study(), out, scheduler=scheduler, workers=workers)
     wall = time.perf_counter() - t0
     return {"wall": wall, "own": (own_cpu() - cpu0) / wall,
             "machine": (machine_busy() - busy0) / wall, "frame": frame}

@@ -7,7 +7,7 @@ and the saddle z = (u^2 - v^2) / (2R) over |u|, |v| <= 2, both with K = +-1/R^2 
 centre. The dimensionless curvature is K L^2 at the centre. Each target is designed at
 8 x 8, 12 x 12 and 16 x 16 panels with the default options, IPOPT run to its tolerance
 (stop_rms off, max_iter 500; no wall-time limit, so that the outcome does not depend on
-the machine's load), all designs one sweep (:mod:`rffqm_nlp.sweep`) on a 2-worker
+the machine's load), all designs one sweep (:mod:`rffqm_nlp.sweeps`) on a 2-worker
 LocalCluster, the largest patterns submitted first.
 
 Writes studies/results/curvature_reach.png (K L^2 against the achieved RMS fit, one line
@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from rffqm_nlp import surfaces, sweep  # noqa: E402
+from rffqm_nlp import surfaces, sweeps  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SIDE = 4.0
@@ -126,9 +126,9 @@ def main() -> None:
     parser.add_argument("--scheduler", default="local", help="local, none or an address")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    study = sweep.Study(base=BASE, parameters={"design.panels": PANELS[::-1]}, cases=cases())
+    study = sweeps.Study(base=BASE, parameters={"design.panels": PANELS[::-1]}, cases=cases())
     t0 = time.perf_counter()
-    frame = sweep.run(study, args.out, scheduler=args.scheduler, workers=args.workers)
+    frame = sweeps.run(study, args.out, scheduler=args.scheduler, workers=args.workers)
     elapsed = time.perf_counter() - t0
     frame["panels"] = frame["design.panels"].astype(int)
     frame["K L^2"] = frame.apply(curvature, axis=1)

@@ -21,7 +21,7 @@ import pytest
 from hypothesis import given, strategies as st
 from typer.testing import CliRunner
 
-from rffqm_nlp import sweep, surfaces
+from rffqm_nlp import surfaces, sweeps
 from rffqm_nlp.cli import app
 from rffqm_nlp.design import DesignProblem, multistart_starts
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
@@ -46,7 +46,7 @@ FIT = ["rms", "rms_surface", "hausdorff", "plane_rms", "min_side_over_mean", "mi
 
 
 def crash_hook(payload: dict, marker_dir: str) -> dict:
-    """:func:`sweep.solve_design`, except that the design named CRASH_ONCE kills its worker
+    """:func:`sweeps.solve_design`, except that the design named CRASH_ONCE kills its worker
     process on its first try (leaving a marker file) and CRASH_ALWAYS on every try."""
     if payload["name"] == CRASH_ALWAYS:
         os._exit(1)
@@ -54,14 +54,14 @@ def crash_hook(payload: dict, marker_dir: str) -> dict:
     if payload["name"] == CRASH_ONCE and not marker.exists():
         marker.touch()
         os._exit(1)
-    return sweep.solve_design(payload)
+    return sweeps.solve_design(payload)
 
 
 def counting_task(calls: list[str]):
-    """:func:`sweep.solve_design` that records the id of every design it solves."""
+    """:func:`sweeps.solve_design` that records the id of every design it solves."""
     def task(payload: dict) -> dict:
         calls.append(payload["id"])
-        return sweep.solve_design(payload)
+        return sweeps.solve_design(payload)
     return task
 
 
@@ -73,19 +73,19 @@ def study_file(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def designs(study_file) -> list[sweep.Design]:
-    return sweep.Study.load(study_file).designs()
+def designs(study_file) -> list[sweeps.Design]:
+    return sweeps.Study.load(study_file).designs()
 
 
 @pytest.fixture(scope="module")
 def cluster_run(study_file, tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     out = tmp_path_factory.mktemp("cluster") / "out"
-    return out, sweep.run(study_file, out, workers=2, progress=False)
+    return out, sweeps.run(study_file, out, workers=2, progress=False)
 
 
 @pytest.fixture(scope="module")
 def serial_run(study_file, tmp_path_factory) -> pd.DataFrame:
-    return sweep.run(study_file, tmp_path_factory.mktemp("serial") / "out", scheduler="none",
+    return sweeps.run(study_file, tmp_path_factory.mktemp("serial") / "out", scheduler="none",
                      progress=False)
 
 
@@ -95,7 +95,7 @@ def crash_run(study_file, tmp_path_factory) -> tuple[Path, Path, pd.DataFrame]:
     markers = base / "markers"
     markers.mkdir()
     task = functools.partial(crash_hook, marker_dir=str(markers))
-    frame = sweep.run(study_file, base / "out", workers=2, worker_retries=1, task=task,
+    frame = sweeps.run(study_file, base / "out", workers=2, worker_retries=1, task=task,
                       progress=False)
     return base / "out", markers, frame
 
@@ -117,7 +117,7 @@ def test_cluster_run_writes_one_row_and_one_folder_per_design(cluster_run, desig
         result = DesignResult.load(out / "designs" / design.id)
         assert result.fit["rms"] == row["rms"]
         assert result.problem["target"]["radius"] == row["target.radius"]
-        assert sweep.completed_row(out / "designs" / design.id, design) is not None
+        assert sweeps.completed_row(out / "designs" / design.id, design) is not None
     assert not [p for p in out.rglob(".*")], "temporary files left behind"
 
 
@@ -163,7 +163,7 @@ def test_resume_skips_finished_designs_and_recomputes_broken_ones(crash_run, ser
     kept = folder["radius=3.5"] / "row.json"
     stamp = kept.stat().st_mtime_ns
     calls: list[str] = []
-    frame = sweep.run(study_file, out, scheduler="none", task=counting_task(calls),
+    frame = sweeps.run(study_file, out, scheduler="none", task=counting_task(calls),
                       progress=False)
     # The broken, the mismatched and the worker_lost designs are solved again, no other.
     assert sorted(calls) == sorted([ids["radius=3"], ids["radius=4"], ids["radius=4.5"]])
@@ -173,7 +173,7 @@ def test_resume_skips_finished_designs_and_recomputes_broken_ones(crash_run, ser
     pd.testing.assert_frame_equal(pd.read_parquet(out / "results.parquet"), frame)
     # Everything is complete now: a third run solves nothing and gives the same table.
     calls.clear()
-    again = sweep.run(study_file, out, scheduler="none", task=counting_task(calls),
+    again = sweeps.run(study_file, out, scheduler="none", task=counting_task(calls),
                       progress=False)
     assert calls == []
     pd.testing.assert_frame_equal(again, frame)
@@ -211,7 +211,7 @@ def test_bad_study_files_raise_input_errors_that_say_what_to_change(text, messag
     path = tmp_path / "bad.toml"
     path.write_text(text + "\n[target]\nname = \"sphere_cap\"\n")
     with pytest.raises(InputError) as info:
-        sweep.Study.load(path).designs()
+        sweeps.Study.load(path).designs()
     assert message in str(info.value)
     assert str(info.value).startswith(f"{path}: ")
 
@@ -227,7 +227,7 @@ def test_base_file_and_inline_tables(tmp_path):
                      "[sweep]\n\"design.panels\" = [8, 12]\n"
                      "[[sweep.cases]]\nname = \"saddle\"\n\"target.name\" = \"saddle\"\n"
                      "[[sweep.cases]]\n\"target.radius\" = 3.0\n")
-    designs = sweep.Study.load(study).designs()
+    designs = sweeps.Study.load(study).designs()
     assert [d.name for d in designs] == ["saddle panels=8", "saddle panels=12",
                                          "radius=3 panels=8", "radius=3 panels=12"]
     assert [d.case for d in designs] == ["saddle", "saddle", "", ""]
@@ -235,10 +235,10 @@ def test_base_file_and_inline_tables(tmp_path):
     # target.name starts the target afresh (no sphere radius on the saddle); other keys merge.
     assert saddle["target"] == surfaces.get("saddle").to_config()
     assert cap["target"]["radius"] == 3.0 and cap["design"]["layout"] == "zigzag_j"
-    assert cap["design"]["panels"] == [12, 12] and cap["solve"] == sweep.SOLVE_DEFAULTS
+    assert cap["design"]["panels"] == [12, 12] and cap["solve"] == sweeps.SOLVE_DEFAULTS
     (tmp_path / "targets" / "cap.toml").unlink()
     with pytest.raises(InputError, match="no such design file .*relative to the study file"):
-        sweep.Study.load(study)
+        sweeps.Study.load(study)
 
 
 @given(radii=st.lists(st.sampled_from([2.5, 3.0, 4.0, 6.0, 9.0]), min_size=1, max_size=4,
@@ -246,7 +246,7 @@ def test_base_file_and_inline_tables(tmp_path):
        layouts=st.lists(st.sampled_from(["zigzag_i", "zigzag_j"]), min_size=1, unique=True),
        seeds=st.lists(st.integers(0, 50), min_size=1, max_size=3, unique=True))
 def test_grid_is_the_product_of_the_lists_with_stable_unique_ids(radii, layouts, seeds):
-    study = sweep.Study(base={"target": {"name": "sphere_cap"}, "design": {"panels": [8, 8]}},
+    study = sweeps.Study(base={"target": {"name": "sphere_cap"}, "design": {"panels": [8, 8]}},
                         parameters={"target.radius": radii, "design.layout": layouts,
                                     "solve.seed": seeds})
     designs = study.designs()
@@ -257,33 +257,33 @@ def test_grid_is_the_product_of_the_lists_with_stable_unique_ids(radii, layouts,
                d.config["solve"]["seed"]) for d in designs}
     assert combos == {(r, lay, s) for r in radii for lay in layouts for s in seeds}
     for d in designs:
-        assert d.id == sweep.design_id(d.config)
+        assert d.id == sweeps.design_id(d.config)
         assert f"radius={d.params['target.radius']:.4g}" in d.name
 
 
 def test_random_sample_is_seeded_and_inside_its_ranges():
     base = {"target": {"name": "sphere_cap"}, "design": {"panels": [8, 8]}}
-    params = {"target.radius": sweep.Range(3.0, 6.0), "design.alpha0": sweep.Range(0.9, 1.3),
-              "solve.seed": sweep.Range(0, 9), "design.layout": ["zigzag_i", "zigzag_j"]}
-    designs = sweep.Study(base=base, parameters=params, sample=6, seed=1).designs()
+    params = {"target.radius": sweeps.Range(3.0, 6.0), "design.alpha0": sweeps.Range(0.9, 1.3),
+              "solve.seed": sweeps.Range(0, 9), "design.layout": ["zigzag_i", "zigzag_j"]}
+    designs = sweeps.Study(base=base, parameters=params, sample=6, seed=1).designs()
     assert len(designs) == 6
     assert [d.id for d in designs] == [
-        d.id for d in sweep.Study(base=base, parameters=params, sample=6, seed=1).designs()]
-    other = sweep.Study(base=base, parameters=params, sample=6, seed=2).designs()
+        d.id for d in sweeps.Study(base=base, parameters=params, sample=6, seed=1).designs()]
+    other = sweeps.Study(base=base, parameters=params, sample=6, seed=2).designs()
     assert {d.id for d in designs}.isdisjoint(d.id for d in other)
     for d in designs:
         assert 3.0 <= d.config["target"]["radius"] <= 6.0
         assert 0.9 <= d.config["design"]["alpha0"] <= 1.3
         assert isinstance(d.config["solve"]["seed"], int) and 0 <= d.config["solve"]["seed"] <= 9
-    grid = sweep.Study(base=base, parameters={"target.radius": [3.0, 4.0, 5.0]}, sample=2)
+    grid = sweeps.Study(base=base, parameters={"target.radius": [3.0, 4.0, 5.0]}, sample=2)
     assert len({d.id for d in grid.designs()}) == 2
     # Whole-number bounds draw reals for real parameters; log ranges stay inside.
-    logs = sweep.Study(base=base, parameters={"target.radius": sweep.Range(2, 20, log=True)},
+    logs = sweeps.Study(base=base, parameters={"target.radius": sweeps.Range(2, 20, log=True)},
                        sample=5).designs()
     radii = [d.config["target"]["radius"] for d in logs]
     assert all(2 <= r <= 20 and r != round(r) for r in radii)
     # Whole-number parameters: distinct draws, and a clear error when too few exist.
-    seeds = sweep.Study(base=base, parameters={"solve.seed": sweep.Range(0, 9)}, sample=10)
+    seeds = sweeps.Study(base=base, parameters={"solve.seed": sweeps.Range(0, 9)}, sample=10)
     assert sorted(d.config["solve"]["seed"] for d in seeds.designs()) == list(range(10))
     with pytest.raises(InputError, match="only 10 distinct designs"):
         replace(seeds, sample=11).designs()
@@ -405,7 +405,13 @@ def test_cli_sweep_user_errors_are_one_line(args, message, tmp_path):
 def test_designs_solve_with_one_thread_in_every_pool_casadis_openblas_included():
     from threadpoolctl import threadpool_info
 
-    with sweep._one_thread():
+    with sweeps._one_thread():
         pools = threadpool_info()
     assert any("casadi" in pool["filepath"] for pool in pools)
     assert all(pool["num_threads"] == 1 for pool in pools)
+
+
+def test_rq_sweep_is_the_run_function():
+    import rffqm_nlp as rq
+
+    assert rq.sweep is sweeps.run and rq.sweeps is sweeps
