@@ -11,7 +11,6 @@ returns a :class:`~rffqm_nlp.results.DesignResult`.
 from __future__ import annotations
 
 import time
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
@@ -23,6 +22,7 @@ from . import numpy_model, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
+from .io import read_toml
 from .results import DesignResult
 
 PI = np.pi
@@ -402,14 +402,7 @@ class DesignProblem:
     @classmethod
     def load(cls, path: str | Path) -> "DesignProblem":
         """A problem from a TOML file with [target] and [design] tables."""
-        try:
-            with open(path, "rb") as fh:
-                config = tomllib.load(fh)
-        except FileNotFoundError:
-            raise InputError(f"no such design file: {path}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"{path} is not valid TOML: {exc}") from None
-        return cls.from_config(config)
+        return cls.from_config(read_toml(path, "design file"))
 
 
 def design_fit(coarse: np.ndarray, target_points: np.ndarray,

@@ -17,6 +17,7 @@ import contextlib
 import json
 import os
 import tempfile
+import tomllib
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -51,6 +52,19 @@ def _umask() -> int:
 
 FILE_MODE = 0o666 & ~_umask()
 DIR_MODE = 0o777 & ~_umask()
+
+
+def read_toml(path: str | os.PathLike, what: str = "file",
+              error: type[InputError] = InputError) -> dict[str, Any]:
+    """The tables of a TOML file; a missing or invalid file raises ``error`` naming ``what``
+    (e.g. "design file") and the path."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise error(f"no such {what}: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{what} {path} is not valid TOML: {exc}") from None
 
 
 @contextlib.contextmanager

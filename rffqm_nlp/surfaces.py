@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import importlib
 import math
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -39,6 +38,7 @@ from scipy.spatial import ConvexHull, cKDTree
 from scipy.spatial.distance import pdist
 
 from .errors import SurfaceError
+from .io import read_toml
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
@@ -696,12 +696,7 @@ def from_config(table: Mapping[str, Any]) -> Surface:
 
 def load(path: str | Path) -> Surface:
     """The surface of the ``[target]`` table of a TOML design file."""
-    path = Path(path)
-    with path.open("rb") as fh:
-        try:
-            data = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as err:
-            raise SurfaceError(f"{path} is not valid TOML: {err}") from err
+    data = read_toml(path, "design file", SurfaceError)
     if not isinstance(data.get("target"), dict):
         raise SurfaceError(f"{path} has no [target] table")
     return from_config(data["target"])

@@ -54,7 +54,6 @@ import os
 import shutil
 import socket
 import time
-import tomllib
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
@@ -66,7 +65,7 @@ import numpy as np
 
 from .design import DesignProblem
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed
-from .io import atomic_path
+from .io import atomic_path, read_toml
 from .results import DesignResult
 
 if TYPE_CHECKING:
@@ -212,13 +211,7 @@ class Study:
     def load(cls, path: str | os.PathLike) -> "Study":
         """A study from its TOML file; ``base`` paths are relative to the file."""
         path = Path(path)
-        try:
-            with open(path, "rb") as fh:
-                config = tomllib.load(fh)
-        except FileNotFoundError:
-            raise InputError(f"no such study file: {path}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"{path} is not valid TOML: {exc}") from None
+        config = read_toml(path, "study file")
         try:
             return replace(cls.from_config(config, root=path.parent), source=str(path))
         except InputError as exc:
@@ -234,14 +227,10 @@ class Study:
         base: dict[str, dict] = {table: {} for table in TABLES}
         if "base" in config:
             base_path = Path(root) / str(config["base"])
-            try:
-                with open(base_path, "rb") as fh:
-                    base_file = tomllib.load(fh)
-            except FileNotFoundError:
+            if not base_path.is_file():
                 raise InputError(f"base = {config['base']!r}: no such design file "
-                                 f"{base_path} (paths are relative to the study file)") from None
-            except tomllib.TOMLDecodeError as exc:
-                raise InputError(f"base file {base_path} is not valid TOML: {exc}") from None
+                                 f"{base_path} (paths are relative to the study file)")
+            base_file = read_toml(base_path, "base file")
             extra = set(base_file) - {"target", "design"}
             if extra:
                 raise InputError(f"base file {base_path} has table(s) {sorted(extra)}; a "

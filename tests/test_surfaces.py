@@ -345,3 +345,5 @@ def test_load_reports_missing_target_table(tmp_path):
     path.write_text("[target\n")
     with pytest.raises(SurfaceError, match="not valid TOML"):
         S.load(path)
+    with pytest.raises(SurfaceError, match="no such design file: .*missing.toml"):
+        S.load(tmp_path / "missing.toml")
