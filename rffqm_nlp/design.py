@@ -308,10 +308,10 @@ class DesignProblem:
         """Expand the NLP to SX (fast evaluation, costly derivative build) or keep MX.
 
         The simultaneous NLP is local, so its SX derivatives are small. The sequential one
-        is dense: its SX Hessian costs 3-5 s to build at 8 x 8 panels, 20-30 s and 3 GB at
-        20 x 20, while the MX Hessian builds in under 3 s at any size but costs 0.1-0.4 s per
-        evaluation (studies/results/bench_inverse.md); SX wins up to
-        :data:`SX_MAX_PANELS` panels.
+        is dense: its SX Hessian took 2-5 s to build at 8 x 8 panels and 19-31 s (3.4 GB) at
+        16 x 16 to 20 x 20, while the MX Hessian builds in 0.4-4 s but costs 0.1-0.4 s per
+        evaluation against 0.01-0.1 s. Measured on the bundled targets, SX was faster in
+        total up to 12 x 12 panels (:data:`SX_MAX_PANELS`), MX from 16 x 16 on.
         """
         return (self.transcription == "simultaneous"
                 or self.panels[0] * self.panels[1] <= SX_MAX_PANELS)
