@@ -70,7 +70,10 @@ class DesignProblem:
     * ``min_angle``: every sector angle in [min_angle, pi - min_angle] (this also keeps the
       first check, eq:firstCheck, away from its limits);
     * ``mu_margin``: |mu_abc| of every panel stays on its starting side of 1 by this margin
-      (second check, eq:secondCheck, with the MV pattern held);
+      (second check, eq:secondCheck, so sigma_d never flips), and the multiplier of every
+      boundary vertex that vanishes where its sigma leaves MV(alpha, beta) keeps its sign,
+      at least this large (:func:`rffqm_nlp.vertex.mv_multiplier`): the MV pattern of the
+      Miura is held at every crease;
     * ``min_length``: every side >= min_length times the mean side (replaces the LP);
     * ``omega_bounds``: bounds of the fold parameter;
     * ``fix``: groups held at their start, among "angles", "lengths", "omega";

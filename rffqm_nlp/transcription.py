@@ -8,8 +8,8 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
   equality constraints, panel by panel (many variables, sparse Jacobians).
 
 Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term and the
-inline constraints (angle bounds, multiplier margins, sides against the mean side), so they
-state the same problem.
+inline constraints (angle bounds, multiplier margins, the boundary MV assignment, sides
+against the mean side), so they state the same problem.
 """
 
 from __future__ import annotations
@@ -134,6 +134,22 @@ class Setup:
         out, m = self.mu_outside, self.mu_margin
         return np.where(out, (1 + m) ** 2 - 1, 1 - (1 - m) ** 2), np.full(out.size, np.inf)
 
+    @cached_property
+    def mv_sign(self) -> np.ndarray:
+        """Per boundary vertex (left then bottom): the sign of :func:`vertex.mv_multiplier` at
+        the Miura start (held)."""
+        ang = self.reference.angles
+        return np.sign(vx.mv_multiplier(ang[:, 0], ang[:, 1], self.reference.sigma))
+
+    def boundary_mv(self, alpha, beta) -> tuple:
+        """The boundary MV assignment held: sign * mv_multiplier >= mu_margin at every
+        boundary vertex (alpha, beta: N+1+M vectors, left then bottom). Interior vertices
+        follow: their multipliers are products of the boundary ones and the panels' mu_abc,
+        which the mu constraints keep on their side of 1. Returns (g, lbg, ubg)."""
+        g = ca.DM(self.mv_sign) * vx.mv_multiplier(alpha, beta, self.reference.sigma)
+        n = self.mv_sign.size
+        return g, np.full(n, self.mu_margin), np.full(n, np.inf)
+
     def rigid0(self) -> np.ndarray:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
@@ -182,7 +198,8 @@ def sequential(setup: Setup) -> NLP:
 
     The pattern and the folded state are functions of x through the marching graph; the
     inline constraints are every vertex angle in [min_angle, pi - min_angle], the multiplier
-    margin of every panel and every side >= min_length * mean side.
+    margin of every panel, the MV assignment of every boundary vertex
+    (:meth:`Setup.boundary_mv`) and every side >= min_length * mean side.
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
@@ -204,12 +221,13 @@ def sequential(setup: Setup) -> NLP:
     sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
     angles = ca.vertcat(ca.vec(alpha), ca.vec(beta))
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
-    g = ca.vertcat(angles, sign * (ca.vec(mu) ** 2 - 1),
+    mv, lo_mv, hi_mv = setup.boundary_mv(x[:nv], x[nv:2 * nv])
+    g = ca.vertcat(angles, sign * (ca.vec(mu) ** 2 - 1), mv,
                    sides / (ca.sum1(sides) / sides.numel()) - setup.min_length)
     lo_mu, hi_mu = setup.mu_bounds()
-    lbg = np.concatenate([np.full(angles.numel(), setup.min_angle), lo_mu,
+    lbg = np.concatenate([np.full(angles.numel(), setup.min_angle), lo_mu, lo_mv,
                           np.zeros(sides.numel())])
-    ubg = np.concatenate([np.full(angles.numel(), PI - setup.min_angle), hi_mu,
+    ubg = np.concatenate([np.full(angles.numel(), PI - setup.min_angle), hi_mu, hi_mv,
                           np.full(sides.numel(), np.inf)])
     lbx = np.concatenate([np.full(2 * nv, setup.min_angle), np.full(nl, 1e-9 * setup.spacing),
                           [setup.omega_bounds[0]], np.full(7, -np.inf)])
@@ -354,11 +372,13 @@ def simultaneous(setup: Setup) -> NLP:
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
     n_eq = (march_res.numel() + th_res.numel() + kv_res.numel() + q_res.numel()
             + y_res.numel() + mean_res.numel())
+    nv = N + 1 + M
+    mv, lo_mv, hi_mv = setup.boundary_mv(bvec[:nv], bvec[nv:2 * nv])
     g = ca.vertcat(march_res, th_res, kv_res, q_res, y_res, mean_res,
-                   sign * (mu ** 2 - 1), sides - setup.min_length * mean)
+                   sign * (mu ** 2 - 1), mv, sides - setup.min_length * mean)
     lo_mu, hi_mu = setup.mu_bounds()
-    lbg = np.concatenate([np.zeros(n_eq), lo_mu, np.zeros(sides.numel())])
-    ubg = np.concatenate([np.zeros(n_eq), hi_mu, np.full(sides.numel(), np.inf)])
+    lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
+    ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
     # Start: the Miura pattern, its directions, panel rotations and folded state.
     args = [start.alpha, start.beta, start.sigma, start.lh, start.lv, setup.omega]
     quat0 = evaluate(panel_quaternions_function(N, M), args)

@@ -60,6 +60,25 @@ def mu1(alpha, beta, sigma):
                         -op.sin(h_plus) / op.sin(h_minus))
 
 
+def mv_multiplier(alpha, beta, sigma: np.ndarray):
+    """The fold multiplier that vanishes where sigma leaves MV(alpha, beta) (Theorem 2.1).
+
+    mu2^{+1} = -sin(h-)/sin(h+) at sigma = +1 vertices (zero at alpha = beta) and
+    mu1^{+1} = 1/mu2^{-1} = cos(h+)/cos(h-) at sigma = -1 vertices (zero at alpha + beta = pi),
+    with h-+ = (alpha -+ beta)/2; finite for angles in (0, pi). Across a zero, mu2 changes
+    sign and with it the sign of gamma2 (tan(gamma2/2) = -tan(omega/2)/mu2): a mountain crease
+    of the vertex becomes a valley. Holding the sign of this multiplier holds the vertex's MV
+    assignment. ``sigma`` is numeric (the signs are data, not design variables).
+    """
+    op = ops(alpha, beta)
+    h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
+    plus = (np.asarray(sigma, dtype=float) > 0).astype(float)
+    if op is _CasADiOps:
+        plus = ca.reshape(ca.DM(plus), *alpha.shape)
+    return (plus * (-op.sin(h_minus) / op.sin(h_plus))
+            + (1 - plus) * (op.cos(h_plus) / op.cos(h_minus)))
+
+
 def fold_by_multiplier(omega, mu):
     """The group element g with tan(g/2) = -tan(omega/2)/mu, on omega in [-pi, pi].
 

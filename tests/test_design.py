@@ -8,6 +8,7 @@ import pytest
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model, surfaces, transcription
+from rffqm_nlp import vertex as vx
 from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.results import DesignResult
 
@@ -37,6 +38,16 @@ def test_small_designs_converge_with_constraints_and_fit(solved):
     start_mu = numpy_model.march(prob.start().boundary).mu
     assert np.all((np.abs(pat.mu) > 1) == (np.abs(start_mu) > 1))
     assert np.all(np.abs(np.abs(pat.mu) - 1) >= prob.mu_margin - 1e-6)
+    # The Miura's MV assignment is held at every crease, boundary multipliers with margin.
+    start_pat = numpy_model.march(prob.start().boundary)
+    for mine, theirs in zip(numpy_model.fold_angles(pat, res.omega),
+                            numpy_model.fold_angles(start_pat, res.omega)):
+        assert np.array_equal(np.sign(mine), np.sign(theirs))
+    ang, sigma = res.boundary.angles, res.boundary.sigma
+    start_ang = prob.start().boundary.angles
+    held = (vx.mv_multiplier(ang[:, 0], ang[:, 1], sigma)
+            * np.sign(vx.mv_multiplier(start_ang[:, 0], start_ang[:, 1], sigma)))
+    assert held.min() >= prob.mu_margin - 1e-6
     # Same folded lattice from both models; the result's fields are consistent.
     Y = numpy_model.fold(pat, res.omega) @ res.rotation.T + res.translation
     np.testing.assert_allclose(Y, res.folded, atol=1e-8 * np.abs(Y).max())

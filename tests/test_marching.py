@@ -3,10 +3,11 @@
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import assume, given, strategies as st
 
 import rffqm_nlp as rq
 from rffqm_nlp import marching as mg
+from rffqm_nlp import numpy_model
 from rffqm_nlp import vertex as vx
 from rffqm_nlp.lengths import side_length_lp
 
@@ -63,6 +64,38 @@ def test_design_formula_matches_paper(total, mu):
     assert s_d == sigma_d
     assert beta_d == pytest.approx(paper, abs=1e-9)
     assert vx.mu2(2 * np.pi - total, beta_d, s_d) == pytest.approx(mu, rel=1e-9)
+
+
+@given(admissible_vertex(), st.floats(0.05, np.pi - 0.05))
+def test_mv_multiplier_is_the_vanishing_multiplier_and_fixes_the_folds(v, omega):
+    a, b, s = v
+    mv = vx.mv_multiplier(np.array([a]), np.array([b]), np.array([s]))[0]
+    mu2 = vx.mu2(a, b, s)
+    assert mv == pytest.approx(mu2 if s > 0 else 1 / mu2, rel=1e-12)
+    # its sign (with sigma) decides the mountain-valley sign of gamma2 = gamma2_bar(omega)
+    assert np.sign(vx.gamma2_bar(omega, a, b, s)) == -np.sign(mv)
+    sym = ca.SX.sym("ab", 2)
+    cas = ca.Function("mv", [sym], [vx.mv_multiplier(sym[0], sym[1], np.array([s]))])
+    assert float(cas([a, b])) == pytest.approx(mv, rel=1e-14)
+
+
+@given(st.integers(0, 10 ** 6), st.floats(0.005, 0.05), st.sampled_from(["zigzag_i", "zigzag_j"]))
+def test_boundary_mv_and_mu_sides_hold_every_crease_mv(seed, amplitude, layout):
+    """The design's MV constraints are on the boundary multipliers and the panels' |mu_abc|
+    only: holding both must hold the mountain-valley sign of every crease."""
+    miura = rq.miura_boundary(6, 6, a=1.0, b=1.0, alpha0=1.3, layout=layout)
+    try:
+        pat = numpy_model.march(rq.perturb_angles(miura, amplitude, seed))
+    except rq.MarchingError:
+        assume(False)
+    ref = numpy_model.march(miura)
+    mv = [vx.mv_multiplier(p.alpha, p.beta, p.sigma) for p in (pat, ref)]
+    boundary = [np.concatenate([m[:, 0], m[0, 1:]]) for m in mv]
+    assume(np.all(np.sign(boundary[0]) == np.sign(boundary[1])))
+    assume(np.all((np.abs(pat.mu) > 1) == (np.abs(ref.mu) > 1)))
+    for mine, theirs in zip(numpy_model.fold_angles(pat, 1.0),
+                            numpy_model.fold_angles(ref, 1.0)):
+        np.testing.assert_array_equal(np.sign(mine), np.sign(theirs))
 
 
 # --------------------------------------------------------------- the pattern
