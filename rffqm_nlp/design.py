@@ -310,14 +310,18 @@ class DesignProblem:
     def _expand(self) -> bool:
         """Expand the NLP to SX (fast evaluation, costly derivative build) or keep MX.
 
-        The simultaneous NLP is local, so its SX derivatives are small. The sequential one
-        is dense: its SX Hessian took 2-5 s to build at 8 x 8 panels and 19-31 s (3.4 GB) at
-        16 x 16 to 20 x 20, while the MX Hessian builds in 0.4-4 s but costs 0.1-0.4 s per
-        evaluation against 0.01-0.1 s. Measured on the bundled targets, SX was faster in
-        total up to 12 x 12 panels (:data:`SX_MAX_PANELS`), MX from 16 x 16 on.
+        The sequential NLP is dense: its SX Hessian took 2-5 s to build at 8 x 8 panels and
+        19-31 s (3.4 GB) at 16 x 16 to 20 x 20, while the MX Hessian builds in 0.4-4 s but
+        costs 0.1-0.4 s per evaluation against 0.01-0.1 s. Measured on the bundled targets,
+        SX was faster in total up to 12 x 12 panels (:data:`SX_MAX_PANELS`), MX from 16 x 16
+        on. The simultaneous NLP's time goes to MUMPS, not to evaluations, and its SX
+        Hessian build grows with the pattern (3.3 s at 20 x 20, 15 s at 40 x 40, most of
+        the 282 s build at 100 x 100), so it stays MX: build + solve of the sphere cap took
+        0.50 s against 0.62 s at 8 x 8, 1.5 s against 2.2 s at 12 x 12 and 6.5 s against
+        9.5 s at 20 x 20.
         """
-        return (self.transcription == "simultaneous"
-                or self.panels[0] * self.panels[1] <= SX_MAX_PANELS)
+        return (self.transcription == "sequential"
+                and self.panels[0] * self.panels[1] <= SX_MAX_PANELS)
 
     def _fit_reached(self, nlp: transcription.NLP, start: Start):
         """For ``stop_rms``: does the aligned coarse lattice at x fit the target well enough?"""
