@@ -145,10 +145,16 @@ def fold_multipliers(alpha, beta, sigma):
     return kh, kv
 
 
-def crease_quaternion(theta, k, c, s, sign=1.0):
-    """Unit quaternion of R_t(sign * gamma), t = (cos theta, sin theta, 0), tan(gamma/2) = k s/c."""
-    r = ca.sqrt(c * c + k * k * s * s)
-    w, sh = c / r, sign * k * s / r
+def crease_quaternion(theta, k, c, s, sign=1.0, k_den=1.0):
+    """Unit quaternion of R_t(sign * gamma), t = (cos theta, sin theta, 0),
+    tan(gamma/2) = (k / k_den) s / c.
+
+    With the multiplier given as a ratio (``k_den``) the quaternion stays smooth where k_den
+    passes 0 (gamma through pi); it is then sign(k_den) times the quaternion of k / k_den,
+    the same rotation.
+    """
+    r = ca.sqrt(c * c * k_den * k_den + k * k * s * s)
+    w, sh = c * k_den / r, sign * k * s / r
     return w, sh * ca.cos(theta), sh * ca.sin(theta), 0 * w
 
 

@@ -290,26 +290,53 @@ def _fold_multipliers_kv(sigma: np.ndarray):
     return kh0, sp
 
 
-def _local_crease_quaternions(A, B, sigma: np.ndarray, TH, omega, KV):
-    """:func:`marching.crease_quaternions` with the column factors lifted.
+def _local_crease_quaternions(A, B, sigma: np.ndarray, TH, omega, PHI):
+    """:func:`marching.crease_quaternions` with the column factors lifted and no quotient.
 
     The fold multiplier kv[i, j] of every vertex of column j carries 1 / m2 of the bottom
-    vertex (i = 0), which would couple each crease of a column to that vertex. KV (N-1 x M)
-    holds kv[1:N, :M] as variables with the local chain KV[i] = sigma[i] KV[i-1] (and the
-    bottom row from its vertex), so every row stays local. Returns (qv, qh, residuals).
+    vertex (i = 0), which would couple each crease of a column to that vertex. It is also
+    infinite where that m2 vanishes (alpha = beta at sigma = +1): a point the boundary MV
+    constraint excludes, but IPOPT's infeasible iterates can cross it. Lifting kv itself
+    (KV[i] = sigma[i] KV[i-1]), the sphere cap and the quarter vase diverged at 40 x 40
+    panels (inf_pr 0.25 -> 32 and 0.06 -> 5.7 in one step, never recovered); lifted as
+    below, they converged in 53 and 69 iterations (the hyperboloid, which converged either
+    way, in 178: see the sides in :func:`simultaneous`).
+
+    PHI (N-1 x M) holds phi = atan(kv[1:N, :M]), smooth through kv = +-inf, with the local
+    chain PHI[i] = sigma[i] PHI[i-1] and the bottom row from its vertex: tan(phi) = kv with
+    m2 = num / den (:func:`vertex.mu2_terms`), i.e. sin(phi) num = -sigma kh0 cos(phi) den.
+    Every crease multiplier is then a ratio of smooth terms, passed to
+    :func:`crease_quaternion` as such: a quaternion of the same rotation up to sign (see
+    :func:`_crease_quaternion_signs`), and the folded state is quadratic in it.
+    Returns (qv, qh, residuals).
     """
     N, M = A.shape[0] - 1, A.shape[1] - 1
     kh0, _ = _fold_multipliers_kv(sigma)
-    S = ca.DM(sigma)
-    m2 = vx.mu2(A, B, S)
+    S, K0 = ca.DM(sigma), ca.DM(kh0).T
+    num, den = vx.mu2_terms(A, B, S)
     c, s = ca.cos(omega / 2), ca.sin(omega / 2)
     theta_v = TH[:-1, :] + A[:-1, :]
-    kv_row0 = -ca.DM(kh0).T / m2[0, :]  # kv[0, :]
-    qv = crease_quaternion(theta_v[0, 1:M], kv_row0[0, 1:M], c, s, sign=-1.0)
-    qh = crease_quaternion(TH[1:N, :M], -KV * m2[1:N, :M], c, s)
-    res = ca.vertcat(ca.vec(KV[0, :] - S[1, :M] * kv_row0[0, :M]),
-                     ca.vec(KV[1:, :] - S[2:N, :M] * KV[:N - 2, :]))
+    # kv[0, j] = -kh0[j] / m2[0, j] and kh[i, j] = -kv[i, j] m2[i, j] = -tan(phi) m2[i, j]
+    qv = crease_quaternion(theta_v[0, 1:M], -K0[0, 1:M] * den[0, 1:M], c, s, sign=-1.0,
+                           k_den=num[0, 1:M])
+    qh = crease_quaternion(TH[1:N, :M], -ca.sin(PHI) * num[1:N, :M], c, s,
+                           k_den=ca.cos(PHI) * den[1:N, :M])
+    res = ca.vertcat(ca.vec(ca.sin(PHI[0, :]) * num[0, :M]
+                            + S[1, :M] * K0[0, :M] * ca.cos(PHI[0, :]) * den[0, :M]),
+                     ca.vec(PHI[1:, :] - S[2:N, :M] * PHI[:N - 2, :]))
     return qv, qh, res
+
+
+def _crease_quaternion_signs(alpha, beta, sigma, phi) -> np.ndarray:
+    """Per panel (N x M): the sign between the panel quaternion of
+    :func:`_local_crease_quaternions` and that of :func:`marching.panel_quaternions_function`
+    at numeric (alpha, beta, phi): the product of sign(k_den) of the creases crossed from
+    panel (1, 1), along the bottom row and then up the column."""
+    N, M = alpha.shape[0] - 1, alpha.shape[1] - 1
+    num, den = vx.mu2_terms(alpha, beta, sigma)
+    row = np.concatenate([[1.0], np.cumprod(np.sign(num[0, 1:M]))])
+    col = np.cumprod(np.sign(np.cos(phi) * den[1:N, :M]), axis=0)
+    return row * np.vstack([np.ones((1, M)), col])
 
 
 def simultaneous(setup: Setup) -> NLP:
@@ -318,11 +345,14 @@ def simultaneous(setup: Setup) -> NLP:
     equality constraints, panel by panel. The Jacobians stay sparse, so large patterns fit.
 
     Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
-    d, l_cd, l_bd. Kinematics: edge directions accumulate sector angles, panel quaternions
-    multiply by crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc).
+    d, l_cd, l_bd; the sides are stated multiplied through by the denominator of
+    eq:getSides (:func:`vertex.panel_side_residuals`). With the quotient the hyperboloid at
+    40 x 40 panels took 178 iterations; without it the three bundled targets took 59-79.
+    Kinematics: edge directions accumulate sector angles, panel quaternions multiply by
+    crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc).
 
     Every equality row is local (a panel and its neighbours): the column factors of the fold
-    multipliers are lifted (KV, see :func:`_local_crease_quaternions`) and the mean side is
+    multipliers are lifted (PHI, see :func:`_local_crease_quaternions`) and the mean side is
     a running mean (C, see :func:`_running_mean`), so the Jacobian colours in about 15
     forward sweeps whatever the size. Solve it with ``mu_strategy = adaptive`` (or a small
     ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1 the barrier terms
@@ -336,7 +366,7 @@ def simultaneous(setup: Setup) -> NLP:
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
                    "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
                    "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "omega": (1, 1),
-                   "KV": (N - 1, M), "C": (n1 * M + N * m1, 1), "rigid": (7, 1)})
+                   "PHI": (N - 1, M), "C": (n1 * M + N * m1, 1), "rigid": (7, 1)})
     x = ca.MX.sym("x", lay.size)
     v = lay.views(x)
     A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
@@ -348,14 +378,18 @@ def simultaneous(setup: Setup) -> NLP:
     xs, ys = cell(ca.vertcat(row(A[1:, :M]), row(B[1:, :M]), row(S[1:, :M]), row(LV[:, :M])),
                   ca.vertcat(row(A[:N, :M]), row(B[:N, :M]), row(S[:N, :M]),
                              row(A[:N, 1:]), row(B[:N, 1:]), row(S[:N, 1:]), row(LH[:N, :])))
+    # The sides of d without the quotient (vertex.panel_side_residuals), with the roles of
+    # the panel cell: a = (i, j), b = (i+1, j), c = (i, j+1).
+    sides_res = vx.panel_side_residuals(A[:N, :M], PI - B[1:, :M], B[:N, 1:], LV[:, :M],
+                                        LH[:N, :], LV[:, 1:], LH[1:, :])
     march_res = ca.vec(ca.vertcat(row(A[1:, 1:]) - xs[0, :], row(B[1:, 1:]) - xs[1, :],
-                                  row(LV[:, 1:]) - xs[3, :], row(LH[1:, :]) - ys[0, :]))
+                                  *(row(r) for r in sides_res)))
     mu = ys[1, :].T
     # Kinematics, lifted.
     th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
                         ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
     quat = [v["Qw"], v["Qx"], v["Qy"], v["Qz"]]
-    qv, qh, kv_res = _local_crease_quaternions(A, B, start.sigma, TH, omega, v["KV"])
+    qv, qh, phi_res = _local_crease_quaternions(A, B, start.sigma, TH, omega, v["PHI"])
     prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
     prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
     q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
@@ -370,11 +404,11 @@ def simultaneous(setup: Setup) -> NLP:
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
     mean_res, mean = _running_mean(sides, v["C"])
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
-    n_eq = (march_res.numel() + th_res.numel() + kv_res.numel() + q_res.numel()
+    n_eq = (march_res.numel() + th_res.numel() + phi_res.numel() + q_res.numel()
             + y_res.numel() + mean_res.numel())
     nv = N + 1 + M
     mv, lo_mv, hi_mv = setup.boundary_mv(bvec[:nv], bvec[nv:2 * nv])
-    g = ca.vertcat(march_res, th_res, kv_res, q_res, y_res, mean_res,
+    g = ca.vertcat(march_res, th_res, phi_res, q_res, y_res, mean_res,
                    sign * (mu ** 2 - 1), mv, sides - setup.min_length * mean)
     lo_mu, hi_mu = setup.mu_bounds()
     lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
@@ -387,11 +421,13 @@ def simultaneous(setup: Setup) -> NLP:
     theta0 = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])(
         start.alpha, start.beta)
     kh0, sp = _fold_multipliers_kv(start.sigma)
-    kv0 = (-kh0 / vx.mu2(start.alpha, start.beta, start.sigma)[0, :] * sp)[1:N, :M]
+    phi0 = np.arctan((-kh0 / vx.mu2(start.alpha, start.beta, start.sigma)[0, :] * sp)[1:N, :M])
+    quat0 = [q * _crease_quaternion_signs(start.alpha, start.beta, start.sigma, phi0)
+             for q in quat0]
     x0 = lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
                    "TH": theta0.full(), "Qw": quat0[0], "Qx": quat0[1], "Qy": quat0[2],
                    "Qz": quat0[3], "Yx": Y0[0], "Yy": Y0[1], "Yz": Y0[2],
-                   "omega": setup.omega, "KV": kv0,
+                   "omega": setup.omega, "PHI": phi0,
                    "C": np.cumsum(np.concatenate([start.lh.ravel("F"), start.lv.ravel("F")]))
                    / start.side_lengths.size,
                    "rigid": setup.rigid0()})

@@ -44,11 +44,23 @@ def ops(*args):
 
 def mu2(alpha, beta, sigma):
     """Fold-angle multiplier mu2^sigma(alpha, beta) (eq:foldAngMult), half-angle form."""
+    num, den = mu2_terms(alpha, beta, sigma)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return num / den
+
+
+def mu2_terms(alpha, beta, sigma):
+    """Numerator and denominator of :func:`mu2`: (cos h-, cos h+) at sigma = -1 and
+    (-sin h-, sin h+) at sigma = +1, h-+ = (alpha -+ beta)/2.
+
+    Both are smooth and never vanish together for angles in (0, pi), so a quantity
+    proportional to mu2 or to 1 / mu2 can be written without a quotient through the points
+    where mu2 is 0 or infinite (see transcription._local_crease_quaternions).
+    """
     op = ops(alpha, beta, sigma)
     h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
-    with np.errstate(divide="ignore", invalid="ignore"):  # the unused branch may divide by 0
-        return op.where(sigma < 0, op.cos(h_minus) / op.cos(h_plus),
-                        -op.sin(h_minus) / op.sin(h_plus))
+    return (op.where(sigma < 0, op.cos(h_minus), -op.sin(h_minus)),
+            op.where(sigma < 0, op.cos(h_plus), op.sin(h_plus)))
 
 
 def mu1(alpha, beta, sigma):
@@ -123,11 +135,29 @@ def design_d(alpha_d, mu_abc):
 
 def panel_sides(alpha_a, alpha_b, alpha_c, l_ab, l_ac):
     """(l_cd, l_bd) from the panel's angles and its left and bottom sides (eq:getSides)."""
+    s, cd, bd = _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
+    return cd / s, bd / s
+
+
+def panel_side_residuals(alpha_a, alpha_b, alpha_c, l_ab, l_ac, l_cd, l_bd):
+    """eq:getSides as residuals multiplied through by its denominator
+    s = sin(alpha_a + alpha_b + alpha_c) = -sin(alpha_d): s l_cd - (...), s l_bd - (...).
+
+    They vanish exactly where :func:`panel_sides` gives (l_cd, l_bd) whenever s != 0, which
+    holds for alpha_d in (0, pi), and are smooth where the quotient is not: an infeasible
+    iterate of the simultaneous transcription can make a panel thin (alpha_d near 0 or pi),
+    where the quotient and its derivatives grow like 1 / s and 1 / s^2.
+    """
+    s, cd, bd = _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
+    return s * l_cd - cd, s * l_bd - bd
+
+
+def _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac):
+    """The denominator and the two numerators of eq:getSides: (s, s l_cd, s l_bd)."""
     op = ops(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
     s = op.sin(alpha_a + alpha_b + alpha_c)
-    l_cd = (-op.sin(alpha_b) * l_ab + op.sin(alpha_a + alpha_b) * l_ac) / s
-    l_bd = (op.sin(alpha_a + alpha_c) * l_ab - op.sin(alpha_c) * l_ac) / s
-    return l_cd, l_bd
+    return (s, -op.sin(alpha_b) * l_ab + op.sin(alpha_a + alpha_b) * l_ac,
+            op.sin(alpha_a + alpha_c) * l_ab - op.sin(alpha_c) * l_ac)
 
 
 def _sign(x, op):

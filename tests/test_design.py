@@ -168,8 +168,11 @@ def test_progress_callback_receives_every_iteration():
     assert all(np.isfinite(s["objective"]) and s["inf_pr"] >= 0 for s in seen)
 
 
-def test_transcriptions_state_the_same_problem_at_the_start():
-    prob = small("quarter_vase")
+@pytest.mark.parametrize("layout", ["zigzag_i", "zigzag_j"])
+def test_transcriptions_state_the_same_problem_at_the_start(layout):
+    # zigzag_j has sigma = -1 vertices with alpha + beta > pi, where the simultaneous crease
+    # quaternions are those of the marching times -1 (transcription._crease_quaternion_signs).
+    prob = small("quarter_vase", layout=layout)
     seq = prob.transcribe()
     sim = replace(prob, transcription="simultaneous").transcribe()
 

@@ -98,6 +98,18 @@ def test_boundary_mv_and_mu_sides_hold_every_crease_mv(seed, amplitude, layout):
         np.testing.assert_array_equal(np.sign(mine), np.sign(theirs))
 
 
+@given(st.floats(0.2, 2.9), st.floats(0.2, 2.9), st.floats(0.2, 2.9), st.floats(0.1, 5),
+       st.floats(0.1, 5))
+def test_side_residuals_vanish_exactly_at_the_sides(a, b, c, l_ab, l_ac):
+    assume(abs(np.sin(a + b + c)) > 0.05)
+    l_cd, l_bd = vx.panel_sides(a, b, c, l_ab, l_ac)
+    scale = max(l_ab, l_ac)
+    for r in vx.panel_side_residuals(a, b, c, l_ab, l_ac, l_cd, l_bd):
+        assert abs(r) <= 1e-13 * scale
+    r_cd, r_bd = vx.panel_side_residuals(a, b, c, l_ab, l_ac, l_cd + 1.0, l_bd)
+    assert r_cd == pytest.approx(np.sin(a + b + c), abs=1e-12) and abs(r_bd) <= 1e-13 * scale
+
+
 # --------------------------------------------------------------- the pattern
 @pytest.mark.parametrize("layout", ["zigzag_j", "zigzag_i"])
 def test_miura_pattern_is_parallelograms(layout):
