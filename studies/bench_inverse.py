@@ -59,6 +59,7 @@ LAYOUT = "zigzag_i"  # pinned (the package default and the bundled targets' sinc
 
 def problem(n: int, **kw) -> DesignProblem:
     kw.setdefault("layout", LAYOUT)
+    kw.setdefault("transcription", "sequential")  # Part A compares the sequential NLP
     return replace(DesignProblem.load(TARGET), panels=(n, n), stop_rms=None, **kw)
 
 

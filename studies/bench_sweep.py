@@ -36,7 +36,8 @@ def study() -> sweeps.Study:
     cases = [{"name": f"R={R:g}", "target.radius": R,
               "target.domain": [[-HALF_SIDE / R, HALF_SIDE / R]] * 2} for R in RADII]
     return sweeps.Study(base={"target": {"name": "sphere_cap"},
-                             "design": {"stop_rms": None, "max_iter": 500}},
+                             "design": {"stop_rms": None, "max_iter": 500,
+                                        "transcription": "sequential"}},
                        parameters={"design.layout": ["zigzag_i", "zigzag_j"],
                                    "design.panels": [6, 8]},
                        cases=cases)

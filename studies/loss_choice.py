@@ -87,7 +87,8 @@ def main() -> None:
     for n in args.sizes:
         for name in TARGETS:
             base = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
-                           layout=LAYOUT, stop_rms=None, time_limit=args.time_limit)
+                           layout=LAYOUT, stop_rms=None, time_limit=args.time_limit,
+                           transcription="sequential")  # measures() reads its x
             start = base.start()
             x0 = base.transcribe(start).x0
             m0 = measures(base, start, x0)

@@ -1,0 +1,93 @@
+"""The two transcriptions side by side: the three bundled targets, 8-16 panels a side, both
+Miura layouts, each solved to IPOPT's tolerance (stop_rms=None) by the sequential and the
+simultaneous NLP from the same Miura start, in one process, one after the other (one BLAS
+thread). Reports status, iterations, objective, RMS/diameter and wall time of
+``DesignProblem.solve()`` (build included), and the sequential/simultaneous time ratio.
+Writes studies/results/compare_transcriptions.md.
+
+    python studies/compare_transcriptions.py [--sizes 8 12 16] [--time-limit 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.errors import RffqmError
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
+LAYOUTS = ("zigzag_i", "zigzag_j")
+TRANSCRIPTIONS = ("sequential", "simultaneous")
+
+
+def solve(prob: DesignProblem) -> dict:
+    t0 = time.perf_counter()
+    try:
+        res = prob.solve()
+    except RffqmError as exc:
+        return {"status": type(exc).__name__ + ": " + str(exc).split(";")[0][:60],
+                "wall": time.perf_counter() - t0}
+    return {"status": res.stats["status"], "iterations": res.stats["iterations"],
+            "objective": res.stats["objective"], "rms": res.fit["rms"],
+            "wall": time.perf_counter() - t0}
+
+
+def cell(r: dict) -> str:
+    if "objective" not in r:
+        return f"{r['status']} | - | - | - | {r['wall']:.1f}"
+    return (f"{r['status']} | {r['iterations']} | {r['objective']:.6g} | "
+            f"{100 * r['rms']:.2f}% | {r['wall']:.1f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[8, 12, 16])
+    ap.add_argument("--time-limit", type=float, default=60.0, help="IPOPT seconds per solve")
+    ap.add_argument("--out", type=Path,
+                    default=ROOT / "studies" / "results" / "compare_transcriptions.md")
+    args = ap.parse_args()
+    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    rows = []
+    with threadpool_limits(1):
+        for name in TARGETS:
+            for n in args.sizes:
+                for layout in LAYOUTS:
+                    prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
+                                   panels=(n, n), layout=layout, stop_rms=None,
+                                   time_limit=args.time_limit)
+                    seq, sim = (solve(replace(prob, transcription=tr)) for tr in TRANSCRIPTIONS)
+                    ratio = (f"{seq['wall'] / sim['wall']:.1f}x"
+                             if "objective" in seq and "objective" in sim else "-")
+                    rows.append(f"| {name} | {n}x{n} | {layout} | {cell(seq)} | {cell(sim)} "
+                                f"| {ratio} |")
+                    print(rows[-1], flush=True)
+    header = [
+        "# Sequential against simultaneous transcription (`studies/compare_transcriptions.py`)",
+        "",
+        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} "
+        f"CPUs, one BLAS thread; load average (1 min) {load0:.1f} at start, "
+        f"{os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        f"- targets/*.toml at n x n panels, both layouts, stop_rms=None, default options, "
+        f"IPOPT time limit {args.time_limit:g} s per solve; time = wall time of "
+        "`DesignProblem.solve()` including the build; ratio = sequential time / simultaneous "
+        "time (both converged)",
+        "",
+        "| target | panels | layout | seq. status | seq. it | seq. objective | seq. RMS/diam "
+        "| seq. time [s] | sim. status | sim. it | sim. objective | sim. RMS/diam "
+        "| sim. time [s] | ratio |",
+        "|" + "---|" * 14,
+    ]
+    args.out.write_text("\n".join(header + rows) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
