@@ -89,10 +89,11 @@ class DesignProblem:
     * ``transcription``: "simultaneous" (the default: all pattern and kinematic quantities
       as variables, the marching equations as sparse equality constraints) or "sequential"
       (the marching graph as a function of the boundary data). Both state the same NLP; on
-      the bundled targets at 8-16 panels a side, both layouts, the simultaneous one was
-      1.1-7x faster and reached the same or a lower objective, and it converges at 40 x 40
-      where the sequential one did not in 240 s; ``hessian``: "gauss-newton" (J^T J of the
-      residuals), "exact" or "limited-memory" (L-BFGS);
+      the bundled targets at 8-16 panels a side, both layouts, the simultaneous one solved
+      18 of 18 (the sequential one 15), 1.2-14x faster
+      (studies/results/compare_transcriptions.md), and it converges at 40 x 40;
+      ``hessian``: "gauss-newton" (J^T J of the residuals), "exact" or "limited-memory"
+      (L-BFGS);
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
     * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
       the target lattice (a fraction of the target's diameter) with every constraint holding

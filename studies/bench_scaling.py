@@ -72,7 +72,7 @@ def main() -> None:
         f"start, {os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
         "- problem: targets/sphere_cap.toml at n x n panels, stop_rms=None, default options "
         "(exact Hessian; sequential: SX derivatives up to 12 x 12 panels, MX above; "
-        "simultaneous: SX); one fresh subprocess per run",
+        "simultaneous: MX); one fresh subprocess per run",
         f"- IPOPT wall-time limit {args.time_limit:.0f} s for n >= {args.limit_from}",
         "- wall = seconds of `prob.solve()` (start, build, solve, NumPy re-march, fit); "
         "peak RSS = VmHWM of the run's own process; speed-up = sequential wall / "
