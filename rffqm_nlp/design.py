@@ -90,7 +90,7 @@ class DesignProblem:
       as variables, the marching equations as sparse equality constraints) or "sequential"
       (the marching graph as a function of the boundary data). Both state the same NLP; on
       the bundled targets at 8-16 panels a side, both layouts, the simultaneous one solved
-      18 of 18 (the sequential one 15), 1.2-14x faster
+      18 of 18 (the sequential one 16), 1.5-6.8x faster
       (studies/results/compare_transcriptions.md), and it converges at 40 x 40;
       ``hessian``: "gauss-newton" (J^T J of the residuals), "exact" or "limited-memory"
       (L-BFGS);

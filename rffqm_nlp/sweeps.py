@@ -382,7 +382,7 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
     design gives status "infeasible", a solver failure "failed" (with IPOPT's status), any
     other exception "error" with its type and message as the reason.
 
-    The solve runs with one thread in every BLAS and OpenMP pool (:func:`_one_thread`):
+    The solve runs with one thread in every BLAS and OpenMP pool (:func:`one_thread`):
     wherever a design runs it then gives the same numbers, and workers sharing a machine do
     not oversubscribe it.
     """
@@ -393,7 +393,7 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
     try:
         problem = DesignProblem.from_config({"target": config["target"],
                                              "design": config["design"]})
-        with _one_thread():
+        with one_thread():
             result = problem.solve(**config["solve"])
     except InfeasibleDesign as exc:
         row.update(status="infeasible", solver_status="Infeasible_Problem_Detected",
@@ -423,7 +423,7 @@ def _stat_columns(stats: Mapping[str, Any]) -> dict[str, Any]:
     return {k: stats[k] for k in ("iterations", "build_time", "solve_time") if k in stats}
 
 
-def _one_thread() -> AbstractContextManager:
+def one_thread() -> AbstractContextManager:
     """Limit every BLAS and OpenMP thread pool of this process to one thread (threadpoolctl),
     CasADi's own OpenBLAS under MUMPS included: threadpoolctl does not know that library by
     name, so it is registered here, and IPOPT's plugin is loaded first (``has_nlpsol`` loads

@@ -1,8 +1,9 @@
 """The two transcriptions side by side: the three bundled targets, 8-16 panels a side, both
 Miura layouts, each solved to IPOPT's tolerance (stop_rms=None) by the sequential and the
 simultaneous NLP from the same Miura start, in one process, one after the other (one BLAS
-thread). Reports status, iterations, objective, RMS/diameter and wall time of
-``DesignProblem.solve()`` (build included), and the sequential/simultaneous time ratio.
+thread, CasADi's OpenBLAS included). Reports status, iterations, objective, RMS/diameter
+and wall time of ``DesignProblem.solve()`` (build included), and the sequential /
+simultaneous time ratio.
 Writes studies/results/compare_transcriptions.md.
 
     python studies/compare_transcriptions.py [--sizes 8 12 16] [--time-limit 60]
@@ -17,10 +18,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from threadpoolctl import threadpool_limits
-
 from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import RffqmError
+from rffqm_nlp.sweeps import one_thread
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
@@ -56,7 +56,7 @@ def main() -> None:
     args = ap.parse_args()
     t0, load0 = time.perf_counter(), os.getloadavg()[0]
     rows = []
-    with threadpool_limits(1):
+    with one_thread():  # CasADi's OpenBLAS under MUMPS included
         for name in TARGETS:
             for n in args.sizes:
                 for layout in LAYOUTS:

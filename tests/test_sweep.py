@@ -402,10 +402,10 @@ def test_cli_sweep_user_errors_are_one_line(args, message, tmp_path):
     assert len(errors) == 1 and message in errors[0], res.output
 
 
-def test_designs_solve_with_one_thread_in_every_pool_casadis_openblas_included():
+def test_designs_solve_withone_thread_in_every_pool_casadis_openblas_included():
     from threadpoolctl import threadpool_info
 
-    with sweeps._one_thread():
+    with sweeps.one_thread():
         pools = threadpool_info()
     assert any("casadi" in pool["filepath"] for pool in pools)
     assert all(pool["num_threads"] == 1 for pool in pools)
