@@ -97,10 +97,10 @@ class DesignProblem:
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
     * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
       the target lattice (a fraction of the target's diameter) with every constraint holding
-      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance. The
-      simultaneous NLP's iterates meet the marching equations only near the optimum, so it
-      saves a few iterations there (32 of 36 for the 20 x 20 sphere cap), many in the
-      sequential one;
+      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance. With the
+      simultaneous transcription the designs judged are the iterates' boundary data
+      re-marched (see :class:`_IterationLog`): the bundled 20 x 20 targets stop after 22, 11
+      and 11 iterations instead of 40, 36 and 31;
     * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
       None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start).
     """
@@ -266,12 +266,13 @@ class DesignProblem:
             stats = dict(solver.stats())
             if log.reached:
                 stats.update(success=True, return_status="Fit_Reached")
-            x = sol["x"].full().ravel()
+            x = log.reached_x if log.reached else sol["x"].full().ravel()
             iterations += int(stats["iter_count"])
             solve_stats = {"status": stats["return_status"], "success": bool(stats["success"]),
                            "iterations": iterations, "build_time": t_build,
                            "solve_time": time.perf_counter() - t0 - t_build,
-                           "objective": float(sol["f"]), "history": history,
+                           "objective": log.reached_objective if log.reached
+                           else float(sol["f"]), "history": history,
                            "transcription": self.transcription, "hessian": self.hessian}
             if not stats["success"] or log.reached:
                 break
@@ -449,8 +450,15 @@ def _violation_report(nlp: transcription.NLP, sol) -> str:
 
 class _IterationLog(ca.Callback):
     """IPOPT iteration callback: records objective and constraint violation per iteration,
-    keeps the best feasible iterate (``best``) and asks IPOPT to stop once ``stop(x)`` holds at
-    an iterate that satisfies the constraints.
+    keeps the best admissible design met on the way (``best``) and asks IPOPT to stop once
+    ``stop(x)`` holds at one (``reached_x``).
+
+    An iterate is admissible when it satisfies every constraint and bound. Where it does not
+    and the NLP can project it (``nlp.project``: the simultaneous transcription re-marches
+    the iterate's boundary data), the projected point is judged instead, with its own
+    objective: the simultaneous NLP meets its marching equations only near the optimum, but
+    its earlier iterates' designs are often admissible and good (the 20 x 20 sphere cap:
+    1.29% RMS/diameter after 15 of 40 iterations, 0.75% after 25).
     """
 
     #: constraint violation below which an iterate counts as feasible for ``stop``
@@ -460,10 +468,16 @@ class _IterationLog(ca.Callback):
         ca.Callback.__init__(self)
         self._stop = stop
         self.reached = False
+        self.reached_x: np.ndarray | None = None
+        self.reached_objective = np.nan
         self.best: np.ndarray | None = None
         self._best_objective = np.inf
         self._nx, self._ng = nlp.x.numel(), nlp.g.numel()
         self._lbg, self._ubg = nlp.lbg, nlp.ubg
+        self._lbx, self._ubx = nlp.lbx, nlp.ubx
+        self._project = nlp.project
+        if nlp.project is not None:
+            self._fg = ca.Function("fg", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])
         self._history = history
         self._callback = callback
         self._t0 = time.perf_counter()
@@ -493,7 +507,7 @@ class _IterationLog(ca.Callback):
 
     def eval(self, arg):
         g = np.asarray(arg[ca.nlpsol_out().index("g")]).ravel()
-        viol = float(np.max(np.concatenate([[0.0], self._lbg - g, g - self._ubg])))
+        viol = self._violation(g)
         entry = {"iter": len(self._history["iter"]),
                  "objective": float(arg[ca.nlpsol_out().index("f")]),
                  "inf_pr": viol, "elapsed": time.perf_counter() - self._t0}
@@ -501,13 +515,27 @@ class _IterationLog(ca.Callback):
             self._history[key].append(value)
         if self._callback is not None:
             self._callback(entry)
+        x = np.asarray(arg[ca.nlpsol_out().index("x")]).ravel()
+        objective = entry["objective"]
+        if viol > self.FEASIBLE and self._project is not None:
+            x = self._project(x)
+            if x is None:
+                return [int(self.reached)]
+            f, g = self._fg(x)
+            objective, viol = float(f), self._violation(g.full().ravel(), x)
         if viol <= self.FEASIBLE:
-            x = np.asarray(arg[ca.nlpsol_out().index("x")]).ravel()
-            if entry["objective"] < self._best_objective:
-                self.best, self._best_objective = x.copy(), entry["objective"]
-            if self._stop is not None:
-                self.reached = bool(self._stop(x))
+            if objective < self._best_objective:
+                self.best, self._best_objective = x.copy(), objective
+            if self._stop is not None and self._stop(x):
+                self.reached, self.reached_x, self.reached_objective = True, x.copy(), objective
         return [int(self.reached)]
+
+    def _violation(self, g: np.ndarray, x: np.ndarray | None = None) -> float:
+        """Largest violation of the constraints at g (and of the bounds at x, if given)."""
+        parts = [[0.0], self._lbg - g, g - self._ubg]
+        if x is not None:
+            parts += [self._lbx - x, x - self._ubx]
+        return float(np.max(np.concatenate(parts)))
 
 
 # ---------------------------------------------------------------------- multistart

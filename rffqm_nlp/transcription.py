@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -23,6 +24,7 @@ import numpy as np
 from . import numpy_model, shape
 from . import vertex as vx
 from .boundary import BoundaryData
+from .errors import InputError, MarchingError
 from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
                        fold_function, folded_function, panel_cell, panel_quaternions_function,
                        pattern_function, qmul, rotated_edges)
@@ -47,6 +49,9 @@ class NLP:
     #: Function of x: the folded vertices (Yx, Yy, Yz)
     folded: ca.Function
     groups: dict
+    #: x -> the point of the design that x's boundary data, omega and alignment define,
+    #: re-marched (None where they do not march); None when every x is such a point
+    project: Callable[[np.ndarray], np.ndarray | None] | None = None
 
 
 def rotation_from_quaternion(q):
@@ -413,24 +418,8 @@ def simultaneous(setup: Setup) -> NLP:
     lo_mu, hi_mu = setup.mu_bounds()
     lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
     ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
-    # Start: the Miura pattern, its directions, panel rotations and folded state.
-    args = [start.alpha, start.beta, start.sigma, start.lh, start.lv, setup.omega]
-    quat0 = evaluate(panel_quaternions_function(N, M), args)
-    Y0 = evaluate(fold_function(N, M), args)
-    a_sym, b_sym = ca.MX.sym("a", n1, m1), ca.MX.sym("b", n1, m1)
-    theta0 = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])(
-        start.alpha, start.beta)
-    kh0, sp = _fold_multipliers_kv(start.sigma)
-    phi0 = np.arctan((-kh0 / vx.mu2(start.alpha, start.beta, start.sigma)[0, :] * sp)[1:N, :M])
-    quat0 = [q * _crease_quaternion_signs(start.alpha, start.beta, start.sigma, phi0)
-             for q in quat0]
-    x0 = lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
-                   "TH": theta0.full(), "Qw": quat0[0], "Qx": quat0[1], "Qy": quat0[2],
-                   "Qz": quat0[3], "Yx": Y0[0], "Yy": Y0[1], "Yz": Y0[2],
-                   "omega": setup.omega, "PHI": phi0,
-                   "C": np.cumsum(np.concatenate([start.lh.ravel("F"), start.lv.ravel("F")]))
-                   / start.side_lengths.size,
-                   "rigid": setup.rigid0()})
+    point = _marched_point(lay, start.sigma)
+    x0 = point(start, setup.omega, setup.rigid0())
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     for name in ("A", "B"):
         lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
@@ -449,5 +438,48 @@ def simultaneous(setup: Setup) -> NLP:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
     folded = ca.Function("folded", [x], Y)
+
+    def project(xk: np.ndarray) -> np.ndarray | None:
+        """The point of the design xk's boundary data define: the NLP's iterates meet the
+        marching equations only near the optimum, but their boundary data, re-marched, are
+        designs in their own right (the constraints still decide whether admissible ones)."""
+        vec, om = (np.asarray(v).ravel() for v in unpack(xk))
+        try:
+            pattern = numpy_model.march(BoundaryData.from_vector(vec, bd0.sigma, N, M))
+        except (InputError, MarchingError):
+            return None
+        if not np.array_equal(pattern.sigma, start.sigma):  # the NLP holds every sigma_d
+            return None
+        return point(pattern, float(om[0]), xk[lay.slices["rigid"]])
+
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
-               unpack=unpack, folded=folded, groups=groups)
+               unpack=unpack, folded=folded, groups=groups, project=project)
+
+
+def _marched_point(lay: _Layout, sigma: np.ndarray):
+    """(pattern, omega, rigid) -> the simultaneous NLP's x of that marched pattern: its
+    angles and sides, edge directions, panel rotations, folded state, lifted fold multiplier
+    angles and running mean. ``sigma`` is the vertex signs the NLP was built with."""
+    N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+    a_sym, b_sym = ca.MX.sym("a", N + 1, M + 1), ca.MX.sym("b", N + 1, M + 1)
+    theta = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])
+    kh0, sp = _fold_multipliers_kv(sigma)
+
+    def point(pattern, omega: float, rigid: np.ndarray) -> np.ndarray:
+        args = [pattern.alpha, pattern.beta, sigma, pattern.lh, pattern.lv, omega]
+        quat = evaluate(panel_quaternions_function(N, M), args)
+        Y = evaluate(fold_function(N, M), args)
+        phi = np.arctan((-kh0 / vx.mu2(pattern.alpha, pattern.beta, sigma)[0, :]
+                         * sp)[1:N, :M])
+        signs = _crease_quaternion_signs(pattern.alpha, pattern.beta, sigma, phi)
+        quat = [q * signs for q in quat]
+        return lay.pack({"A": pattern.alpha, "B": pattern.beta, "LH": pattern.lh,
+                         "LV": pattern.lv, "TH": theta(pattern.alpha, pattern.beta).full(),
+                         "Qw": quat[0], "Qx": quat[1], "Qy": quat[2], "Qz": quat[3],
+                         "Yx": Y[0], "Yy": Y[1], "Yz": Y[2], "omega": omega, "PHI": phi,
+                         "C": np.cumsum(np.concatenate([pattern.lh.ravel("F"),
+                                                        pattern.lv.ravel("F")]))
+                         / pattern.side_lengths.size,
+                         "rigid": rigid})
+
+    return point

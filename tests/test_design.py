@@ -143,6 +143,54 @@ def test_failure_carries_the_best_feasible_iterate():
     assert float(f) < history["objective"][0]
 
 
+def test_simultaneous_failure_carries_the_best_remarched_design():
+    # Its iterates break the marching equations, but their boundary data, re-marched, are
+    # admissible designs: the best of those is carried.
+    problem = small("sphere_cap", max_iter=4, tol=1e-12)
+    with pytest.raises(rq.SolverFailed) as exc:
+        problem.solve()
+    best, history = exc.value.best_iterate, exc.value.stats["history"]
+    assert max(history["inf_pr"][1:]) > 1e-6  # the path is infeasible
+    nlp = problem.transcribe()
+    f, g = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])(best)
+    g = g.full().ravel()
+    assert np.all(g >= nlp.lbg - 1e-9) and np.all(g <= nlp.ubg + 1e-9)
+    assert np.all(best >= nlp.lbx) and np.all(best <= nlp.ubx)
+    assert float(f) < history["objective"][0]
+
+
+def test_projection_remarches_the_boundary_data_of_any_iterate():
+    prob = small("quarter_vase")
+    nlp = prob.transcribe()
+    rng = np.random.default_rng(1)
+    x = nlp.x0 + 1e-3 * rng.standard_normal(nlp.x0.size)  # off the marching equations
+    xp = nlp.project(x)
+    n_eq = int(np.sum(nlp.lbg == nlp.ubg))
+    g = ca.Function("g", [nlp.x], [nlp.g])(xp).full().ravel()
+    assert np.abs(g[:n_eq]).max() <= 1e-12 and np.abs(
+        ca.Function("g", [nlp.x], [nlp.g])(x).full().ravel()[:n_eq]).max() > 1e-4
+    vec, om = (np.asarray(v).ravel() for v in nlp.unpack(x))
+    np.testing.assert_array_equal(np.concatenate([v.full().ravel() for v in nlp.unpack(xp)]),
+                                  np.concatenate([vec, om]))
+    bd = rq.BoundaryData.from_vector(vec, prob.start().boundary.sigma, 2 * prob.N, 2 * prob.M)
+    folded = np.stack([c.full() for c in nlp.folded(xp)], axis=-1)
+    np.testing.assert_allclose(folded, numpy_model.fold(numpy_model.march(bd), om[0]),
+                               atol=1e-12)
+    # boundary data that do not march have no point
+    idx = nlp.groups["angles"]
+    for _ in range(100):
+        bad = x.copy()
+        bad[idx] = np.clip(bad[idx] + rng.uniform(-0.5, 0.5, idx.size), 0.2, np.pi - 0.2)
+        vec = nlp.unpack(bad)[0].full().ravel()
+        try:
+            numpy_model.march(rq.BoundaryData.from_vector(vec, bd.sigma, bd.N, bd.M))
+        except (rq.MarchingError, rq.InputError):
+            break
+    else:
+        pytest.fail("no perturbation made the boundary data fail to march")
+    assert nlp.project(bad) is None
+
+
 def test_unreachable_min_length_reports_infeasibility():
     with pytest.raises(rq.InfeasibleDesign, match="min_length"):
         small("sphere_cap", min_length=1.5).solve()
@@ -211,9 +259,10 @@ def test_transcriptions_reach_the_same_optimum(name):
     assert sim.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
 
 
-def test_stop_rms_stops_early_at_a_feasible_fit():
-    # sequential: feasible early, so the fit goal is met well before IPOPT's tolerance
-    prob = small("sphere_cap", transcription="sequential")
+@pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
+def test_stop_rms_stops_early_at_a_feasible_fit(transcription):
+    # the simultaneous NLP stops at a re-marched iterate (see the test above)
+    prob = small("sphere_cap", transcription=transcription)
     full = prob.solve()
     goal = 1.2 * full.fit["rms"]
     early = replace(prob, stop_rms=goal).solve()
