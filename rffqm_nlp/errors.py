@@ -63,8 +63,9 @@ class InfeasibleDesign(RffqmError):
 class SolverFailed(RffqmError):
     """IPOPT (or another solver) did not succeed; carries its status and the last iterate.
 
-    ``best_iterate`` is the feasible iterate with the smallest objective the solver visited
-    (None when it visited none or does not report iterates); it can warm-start a new solve.
+    ``best_iterate`` is the feasible point with the smallest objective the solver visited
+    (for the simultaneous design NLP, an iterate's boundary data re-marched; None when it
+    visited none or does not report iterates); it can warm-start a new solve.
     """
 
     def __init__(
