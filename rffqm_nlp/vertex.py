@@ -82,13 +82,12 @@ def mv_multiplier(alpha, beta, sigma: np.ndarray):
     of the vertex becomes a valley. Holding the sign of this multiplier holds the vertex's MV
     assignment. ``sigma`` is numeric (the signs are data, not design variables).
     """
-    op = ops(alpha, beta)
-    h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
     plus = (np.asarray(sigma, dtype=float) > 0).astype(float)
-    if op is _CasADiOps:
+    if ops(alpha, beta) is _CasADiOps:
         plus = ca.reshape(ca.DM(plus), *alpha.shape)
-    return (plus * (-op.sin(h_minus) / op.sin(h_plus))
-            + (1 - plus) * (op.cos(h_plus) / op.cos(h_minus)))
+    num, den = mu2_terms(alpha, beta, 2 * plus - 1)
+    # num / den at sigma = +1, den / num at sigma = -1: both divisors stay positive
+    return (plus * num + (1 - plus) * den) / (plus * den + (1 - plus) * num)
 
 
 def fold_by_multiplier(omega, mu):

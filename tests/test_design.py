@@ -133,14 +133,19 @@ def test_failure_carries_the_best_feasible_iterate():
     with pytest.raises(rq.SolverFailed) as exc:
         problem.solve()
     best, history = exc.value.best_iterate, exc.value.stats["history"]
-    nlp = problem.transcribe()
-    f, g = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])(best)
+    f = admissible_objective(problem.transcribe(), best)
+    feasible = [o for o, v in zip(history["objective"], history["inf_pr"]) if v <= 1e-9]
+    assert f == pytest.approx(min(feasible), rel=1e-12)
+    assert f < history["objective"][0]
+
+
+def admissible_objective(nlp: transcription.NLP, x: np.ndarray) -> float:
+    """The objective at x, asserting that x satisfies every constraint and bound."""
+    f, g = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])(x)
     g = g.full().ravel()
     assert np.all(g >= nlp.lbg - 1e-9) and np.all(g <= nlp.ubg + 1e-9)
-    assert np.all(best >= nlp.lbx) and np.all(best <= nlp.ubx)
-    feasible = [o for o, v in zip(history["objective"], history["inf_pr"]) if v <= 1e-9]
-    assert float(f) == pytest.approx(min(feasible), rel=1e-12)
-    assert float(f) < history["objective"][0]
+    assert np.all(x >= nlp.lbx) and np.all(x <= nlp.ubx)
+    return float(f)
 
 
 def test_simultaneous_failure_carries_the_best_remarched_design():
@@ -151,12 +156,7 @@ def test_simultaneous_failure_carries_the_best_remarched_design():
         problem.solve()
     best, history = exc.value.best_iterate, exc.value.stats["history"]
     assert max(history["inf_pr"][1:]) > 1e-6  # the path is infeasible
-    nlp = problem.transcribe()
-    f, g = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])(best)
-    g = g.full().ravel()
-    assert np.all(g >= nlp.lbg - 1e-9) and np.all(g <= nlp.ubg + 1e-9)
-    assert np.all(best >= nlp.lbx) and np.all(best <= nlp.ubx)
-    assert float(f) < history["objective"][0]
+    assert admissible_objective(problem.transcribe(), best) < history["objective"][0]
 
 
 def test_projection_remarches_the_boundary_data_of_any_iterate():
