@@ -65,11 +65,9 @@ def mu2_terms(alpha, beta, sigma):
 
 def mu1(alpha, beta, sigma):
     """Fold-angle multiplier mu1^{-sigma}(alpha, beta) = 1 / mu2^sigma(alpha, beta)."""
-    op = ops(alpha, beta, sigma)
-    h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
+    num, den = mu2_terms(alpha, beta, sigma)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return op.where(sigma < 0, op.cos(h_plus) / op.cos(h_minus),
-                        -op.sin(h_plus) / op.sin(h_minus))
+        return den / num
 
 
 def mv_multiplier(alpha, beta, sigma: np.ndarray):
