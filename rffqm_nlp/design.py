@@ -309,6 +309,8 @@ class DesignProblem:
             opts["hess_lag"] = ca.Function(
                 "nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
                 ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        elif nlp.parts is not None:
+            opts["hess_lag"] = transcription.lagrangian_hessian(nlp)
         log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start))
         opts["iteration_callback"] = log
         solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)

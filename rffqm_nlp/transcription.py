@@ -27,7 +27,7 @@ from .boundary import BoundaryData
 from .errors import InputError, MarchingError
 from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
                        fold_function, folded_function, panel_cell, panel_quaternions_function,
-                       pattern_function, qmul, rotated_edges)
+                       pattern_function, qmul, rotated_edges, vertices_from_edges)
 
 PI = np.pi
 
@@ -52,6 +52,28 @@ class NLP:
     #: x -> the point of the design that x's boundary data, omega and alignment define,
     #: re-marched (None where they do not march); None when every x is such a point
     project: Callable[[np.ndarray], np.ndarray | None] | None = None
+    #: (local, global) symbols with x = vertcat(local, global), where the few global
+    #: variables couple with every panel; see :func:`lagrangian_hessian`
+    parts: tuple[ca.MX, ca.MX] | None = None
+
+
+def lagrangian_hessian(nlp: NLP) -> ca.Function:
+    """IPOPT's ``hess_lag`` for an NLP with ``parts``: the Hessian of
+    L = lam_f f + lam_g' g assembled around its few dense rows and columns.
+
+    Omega enters every crease and the rigid alignment every lattice point, so the Hessian
+    has dense rows; CasADi's star colouring of the whole Hessian grows like their degree
+    squared (68% of the 4-minute build at 60 x 60 panels). Here only the local block is
+    coloured; the global rows are reverse-mode gradients of grad_global L.
+    """
+    local, glob = nlp.parts
+    lam_f, lam_g, p = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp.g.numel()), ca.MX.sym("p", 0)
+    L = lam_f * 0.5 * ca.sumsqr(nlp.residuals) + ca.dot(lam_g, nlp.g)
+    grad = ca.gradient(L, glob)
+    cross = ca.jacobian(grad, local)
+    H = ca.blockcat([[ca.hessian(L, local)[0], cross.T], [cross, ca.jacobian(grad, glob)]])
+    return ca.Function("nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(H)],
+                       ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
 
 def rotation_from_quaternion(q):
@@ -73,12 +95,13 @@ def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
-def loss_residuals(Y, rotation, translation, target: np.ndarray, weights: dict[str, float],
+def loss_residuals(r, rotation, translation, target: np.ndarray, weights: dict[str, float],
                    spacing: float):
-    """Residuals of the loss for folded vertices Y = (Yx, Yy, Yz) ((2N+1) x (2M+1) each).
+    """Residuals of the loss for the coarse lattice r(i, j) = y^{(2i)(2j)} of the folded
+    vertices, r = (rx, ry, rz) ((N+1) x (M+1) each).
 
     * ``forms``: the paper's loss (eq:optInverse): discrete first and second fundamental forms
-      of the coarse lattice r(i, j) = y^{(2i)(2j)} minus the target's, at interior points, by
+      of r minus the target's, at interior points, by
       the same central differences (:func:`shape.fundamental_forms`), over spacing^2;
     * ``position``: R r + t minus the target lattice over ``spacing``: the position term
       after alignment (R, t are design variables) that sees the sideways offsets of the four
@@ -87,7 +110,6 @@ def loss_residuals(Y, rotation, translation, target: np.ndarray, weights: dict[s
     Each group is divided by sqrt(its count) and multiplied by sqrt(weight), so a weight is
     the share of a mean square in the objective.
     """
-    r = [c[::2, ::2] for c in Y]
     out = []
     if weights.get("forms", 0) > 0:
         mine = shape.fundamental_forms(r)
@@ -160,15 +182,15 @@ class Setup:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
 
-def _objective_residuals(setup: Setup, Y, rigid, boundary_vec) -> ca.MX:
-    """Loss, quaternion normalisation, the Tikhonov term towards the Miura start and the
+def _objective_residuals(setup: Setup, r, rigid, boundary_vec) -> ca.MX:
+    """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the Tikhonov term towards the Miura start and the
     smoothness of the boundary perturbation (lengths in units of the lattice spacing)."""
     q, t = rigid[:4], rigid[4:]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
     scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
     delta = (boundary_vec - ref) * scale
-    out = [loss_residuals(Y, rotation_from_quaternion(q), t, setup.target, setup.weights,
+    out = [loss_residuals(r, rotation_from_quaternion(q), t, setup.target, setup.weights,
                           setup.spacing),
            ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
            np.sqrt(setup.weights.get("regularization", 0) / scale.size) * delta]
@@ -221,7 +243,8 @@ def sequential(setup: Setup) -> NLP:
     inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
     Y = folded_function(N, M).call([*inputs, omega])
     x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()])
-    res = _objective_residuals(setup, Y, x[groups["rigid"]], x[:2 * nv + nl + 1])
+    res = _objective_residuals(setup, [c[::2, ::2] for c in Y], x[groups["rigid"]],
+                               x[:2 * nv + nl + 1])
     # Inline constraints on the marched pattern.
     alpha, beta, _, lh, lv, mu = pattern_function(N, M).call(inputs)[:6]
     sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
@@ -273,18 +296,48 @@ class _Layout:
         return self.slices[name].start + np.atleast_1d(grid[rows, cols]).ravel()
 
 
-def _running_mean(sides, C):
-    """Banded statement of the mean side: C_k = C_{k-1} + s_k / K (C_0 = s_0 / K), so that
-    C_{K-1} is the mean of the K sides.
+class _MeanTree:
+    """The mean of K sides as a tree of partial means: level 1 averages blocks of
+    ``branching`` consecutive sides, each further level blocks of the level below, up to one
+    root, the mean. Every node is a variable and every tree equation is local.
 
     One equation sum(s) = K * mean would be a dense row of the constraint Jacobian, and the
     mean a dense column (it enters every side constraint); CasADi colours Jacobians in one
     direction, so that row and column together cost a sweep per side (841 forward, 1601
-    reverse colours at 20 x 20 panels). The running mean keeps every row local.
-    Returns (residuals, mean).
+    reverse colours at 20 x 20 panels). The tree adds about K / (branching - 1) unknowns
+    and keeps the colours near ``branching``; a running mean (one variable per side) did
+    the same with K unknowns, 12% of the KKT system at 20 x 20 panels.
     """
-    K = sides.numel()
-    return ca.vertcat(C[0] - sides[0] / K, C[1:] - C[:-1] - sides[1:] / K), C[K - 1]
+
+    def __init__(self, K: int, branching: int = 16):
+        self.levels: list[ca.DM] = []  # weights: node = sum of weight * child
+        weight = np.ones(K)  # sides under each node of the level below
+        while weight.size > 1:
+            parent = np.arange(weight.size) // branching
+            size = np.bincount(parent, weights=weight)
+            self.levels.append(ca.DM.triplet(parent.tolist(), list(range(weight.size)),
+                                             (weight / size[parent]).tolist(),
+                                             size.size, weight.size))
+            weight = size
+        self.size = sum(W.size1() for W in self.levels)
+
+    def residuals(self, sides, P) -> tuple:
+        """(residuals, mean) for the sides and the node variables P (``size``, level by
+        level, the root last)."""
+        out, below, k = [], sides, 0
+        for W in self.levels:
+            node = P[k:k + W.size1()]
+            out.append(node - ca.mtimes(W, below))
+            below, k = node, k + W.size1()
+        return ca.vertcat(*out), P[self.size - 1]
+
+    def nodes(self, sides: np.ndarray) -> np.ndarray:
+        """The node values of numeric sides."""
+        out, below = [], ca.DM(sides)
+        for W in self.levels:
+            below = ca.mtimes(W, below)
+            out.append(below.full().ravel())
+        return np.concatenate(out)
 
 
 def _fold_multipliers_kv(sigma: np.ndarray):
@@ -347,20 +400,23 @@ def _crease_quaternion_signs(alpha, beta, sigma, phi) -> np.ndarray:
 
 def simultaneous(setup: Setup) -> NLP:
     """The simultaneous transcription: every vertex angle, side, edge direction, panel
-    rotation (quaternion) and folded vertex is a variable, and the marching equations are
-    equality constraints, panel by panel. The Jacobians stay sparse, so large patterns fit.
+    rotation (quaternion) and coarse lattice point r(i, j) = y^{(2i)(2j)} is a variable, and
+    the marching equations are equality constraints, panel by panel. The Jacobians stay
+    sparse, so large patterns fit.
 
     Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
     d, l_cd, l_bd; the sides are stated multiplied through by the denominator of
     eq:getSides (:func:`vertex.panel_side_residuals`). With the quotient the hyperboloid at
     40 x 40 panels took 178 iterations; without it the three bundled targets took 59-79.
     Kinematics: edge directions accumulate sector angles, panel quaternions multiply by
-    crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc).
+    crease quaternions (eq:defGrads), lattice points add two rotated edges each
+    (eq:finalCalc); the loss sees only the coarse lattice, and the other vertices would add
+    a fifth of the KKT system.
 
     Every equality row is local (a panel and its neighbours): the column factors of the fold
     multipliers are lifted (PHI, see :func:`_local_crease_quaternions`) and the mean side is
-    a running mean (C, see :func:`_running_mean`), so the Jacobian colours in about 15
-    forward sweeps whatever the size. Solve it with ``mu_strategy = adaptive`` (or a small
+    the root of a tree of partial means (P, see :class:`_MeanTree`), so the Jacobian
+    colours in a few tens of forward sweeps whatever the size. Solve it with ``mu_strategy = adaptive`` (or a small
     ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1 the barrier terms
     (hundreds of logs against a loss of about 0.05) pull this infeasible-path method towards
     square panels and long sides (the central point at mu = 0.1 has all angles in
@@ -369,11 +425,14 @@ def simultaneous(setup: Setup) -> NLP:
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
     n1, m1 = N + 1, M + 1
+    coarse = (N // 2 + 1, M // 2 + 1)
+    tree = _MeanTree(n1 * M + N * m1)
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
                    "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
-                   "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "omega": (1, 1),
-                   "PHI": (N - 1, M), "C": (n1 * M + N * m1, 1), "rigid": (7, 1)})
-    x = ca.MX.sym("x", lay.size)
+                   "Rx": coarse, "Ry": coarse, "Rz": coarse, "PHI": (N - 1, M),
+                   "P": (tree.size, 1), "omega": (1, 1), "rigid": (7, 1)})
+    parts = (ca.MX.sym("x", lay.size - 8), ca.MX.sym("x_global", 8))  # omega, rigid
+    x = ca.vertcat(*parts)
     v = lay.views(x)
     A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
     start = numpy_model.march(bd0)
@@ -400,15 +459,17 @@ def simultaneous(setup: Setup) -> NLP:
     prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
     q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
                        *(ca.vec(c[1:, :] - p) for c, p in zip(quat, prod_rows)))
-    Y = [v["Yx"], v["Yy"], v["Yz"]]
+    r = [v["Rx"], v["Ry"], v["Rz"]]
     bottom, vertical = rotated_edges(quat, A, TH, LH, LV)
-    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :M] - b) for c, b in zip(Y, bottom)),
-                       *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
+    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :-1] - b[0, ::2] - b[0, 1::2])
+                         for c, b in zip(r, bottom)),
+                       *(ca.vec(c[1:, :] - c[:-1, :] - e[::2, ::2] - e[1::2, ::2])
+                         for c, e in zip(r, vertical)))
     # Boundary design vector in BoundaryData.to_vector order.
     bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
-    res = _objective_residuals(setup, Y, v["rigid"], bvec)
+    res = _objective_residuals(setup, r, v["rigid"], bvec)
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
-    mean_res, mean = _running_mean(sides, v["C"])
+    mean_res, mean = tree.residuals(sides, v["P"])
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
     n_eq = (march_res.numel() + th_res.numel() + phi_res.numel() + q_res.numel()
             + y_res.numel() + mean_res.numel())
@@ -419,7 +480,7 @@ def simultaneous(setup: Setup) -> NLP:
     lo_mu, hi_mu = setup.mu_bounds()
     lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
     ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
-    point = _marched_point(lay, start.sigma)
+    point = _marched_point(lay, start.sigma, tree)
     x0 = point(start, setup.omega, setup.rigid0())
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     for name in ("A", "B"):
@@ -427,7 +488,7 @@ def simultaneous(setup: Setup) -> NLP:
     for name in ("LH", "LV"):
         lbx[lay.slices[name]] = 1e-9 * setup.spacing
     lbx[lay.slices["omega"]], ubx[lay.slices["omega"]] = setup.omega_bounds
-    for name in ("TH", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):  # R^{11} = I, y^{11} = 0
+    for name in ("TH", "Qx", "Qy", "Qz", "Rx", "Ry", "Rz"):  # R^{11} = I, y^{11} = 0
         lbx[lay.index(name, 0, 0)] = ubx[lay.index(name, 0, 0)] = 0.0
     lbx[lay.index("Qw", 0, 0)] = ubx[lay.index("Qw", 0, 0)] = 1.0
     groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
@@ -438,7 +499,7 @@ def simultaneous(setup: Setup) -> NLP:
     for name in setup.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
-    folded = ca.Function("folded", [x], Y)
+    folded = ca.Function("folded", [x], list(vertices_from_edges(bottom, vertical)))
 
     def project(xk: np.ndarray) -> np.ndarray | None:
         """The point of the design xk's boundary data define: the NLP's iterates meet the
@@ -454,13 +515,14 @@ def simultaneous(setup: Setup) -> NLP:
         return point(pattern, float(om[0]), xk[lay.slices["rigid"]])
 
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
-               unpack=unpack, folded=folded, groups=groups, project=project)
+               unpack=unpack, folded=folded, groups=groups, project=project, parts=parts)
 
 
-def _marched_point(lay: _Layout, sigma: np.ndarray):
+def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):
     """(pattern, omega, rigid) -> the simultaneous NLP's x of that marched pattern: its
-    angles and sides, edge directions, panel rotations, folded state, lifted fold multiplier
-    angles and running mean. ``sigma`` is the vertex signs the NLP was built with."""
+    angles and sides, edge directions, panel rotations, coarse lattice, lifted fold
+    multiplier angles and partial means. ``sigma`` is the vertex signs the NLP was built
+    with."""
     N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
     a_sym, b_sym = ca.MX.sym("a", N + 1, M + 1), ca.MX.sym("b", N + 1, M + 1)
     theta = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])
@@ -477,10 +539,10 @@ def _marched_point(lay: _Layout, sigma: np.ndarray):
         return lay.pack({"A": pattern.alpha, "B": pattern.beta, "LH": pattern.lh,
                          "LV": pattern.lv, "TH": theta(pattern.alpha, pattern.beta).full(),
                          "Qw": quat[0], "Qx": quat[1], "Qy": quat[2], "Qz": quat[3],
-                         "Yx": Y[0], "Yy": Y[1], "Yz": Y[2], "omega": omega, "PHI": phi,
-                         "C": np.cumsum(np.concatenate([pattern.lh.ravel("F"),
-                                                        pattern.lv.ravel("F")]))
-                         / pattern.side_lengths.size,
+                         "Rx": Y[0][::2, ::2], "Ry": Y[1][::2, ::2], "Rz": Y[2][::2, ::2],
+                         "omega": omega, "PHI": phi,
+                         "P": tree.nodes(np.concatenate([pattern.lh.ravel("F"),
+                                                         pattern.lv.ravel("F")])),
                          "rigid": rigid})
 
     return point

@@ -5,6 +5,7 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model, surfaces, transcription
@@ -107,6 +108,12 @@ def test_nlp_derivatives_match_finite_differences(transcription):
     x0 = nlp.x0 + 1e-3 * rng.normal(size=nlp.x0.size)
     mult = rng.normal(size=nlp.g.numel())
     _, grad, _, jac, _, hess = (np.array(v.full()) for v in F(x0, mult))
+    if nlp.parts is not None:  # IPOPT gets the Hessian assembled around the global rows
+        H = rq.transcription.lagrangian_hessian(nlp)
+        assert H.sparsity_out(0) == ca.triu(F.sparsity_out(5))
+        upper = np.array(ca.densify(H(x0, [], 1.0, mult)).full())
+        np.testing.assert_allclose(upper, np.triu(hess), rtol=0, atol=1e-12 * np.abs(hess).max())
+        hess = upper + np.triu(upper, 1).T
     h = 1e-6
     for _ in range(3):
         d = rng.normal(size=x0.size)
@@ -117,6 +124,23 @@ def test_nlp_derivatives_match_finite_differences(transcription):
             fd = (plus - minus).full().ravel() / (2 * h)
             np.testing.assert_allclose(fd, exact.ravel(), rtol=1e-5,
                                        atol=1e-6 * np.abs(exact).max())
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(2, 3000), st.integers(2, 20), st.randoms(use_true_random=False))
+def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd):
+    tree = transcription._MeanTree(K, branching)
+    sides = np.array([rnd.uniform(0.1, 10) for _ in range(K)])
+    nodes = tree.nodes(sides)
+    assert nodes.size == tree.size and nodes[-1] == pytest.approx(sides.mean(), rel=1e-13)
+    s, P = ca.MX.sym("s", K), ca.MX.sym("P", tree.size)
+    res, mean = tree.residuals(s, P)
+    F = ca.Function("F", [s, P], [res, mean])
+    r, m = F(sides, nodes)
+    assert np.abs(r.full()).max(initial=0) <= 1e-12 * sides.max() and float(m) == nodes[-1]
+    jac = ca.jacobian_sparsity(res, ca.vertcat(s, P))
+    rows = np.diff(np.array(jac.T.colind()))  # entries per residual row
+    assert rows.max(initial=0) <= branching + 1
 
 
 def test_forced_failure_raises_solver_failed_with_status():
