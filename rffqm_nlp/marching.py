@@ -277,18 +277,12 @@ def _fold_expr(alpha, beta, sigma, lh, lv, omega):
     steps = ca.vertcat(*(ca.reshape(comp.T, 1, M * (N - 1)) for comp in qh))
     Q = _cumulative_qprod(q_row1, steps, N - 1, M)
     quat = [ca.reshape(Q[k, :], M, N).T for k in range(4)]  # (N x M) per component
-    return vertices_from_edges(*rotated_edges(quat, alpha, theta_h, lh, lv)), quat
-
-
-def vertices_from_edges(bottom, vertical) -> tuple:
-    """Folded vertices (3 components, N+1 x M+1) from the rotated edges of
-    :func:`rotated_edges`: along the bottom row, then up every column (eq:finalCalc)."""
-    N = vertical[0].shape[0]
+    bottom, vertical = rotated_edges(quat, alpha, theta_h, lh, lv)
     out = []
     for b, v in zip(bottom, vertical):
         row1 = ca.horzcat(0, ca.cumsum(b, 1))
         out.append(ca.vertcat(row1, ca.repmat(row1, N, 1) + ca.cumsum(v, 0)))
-    return tuple(out)
+    return tuple(out), quat
 
 
 # --------------------------------------------------------------------------- evaluation
