@@ -183,8 +183,9 @@ class Setup:
 
 
 def _objective_residuals(setup: Setup, r, rigid, boundary_vec) -> ca.MX:
-    """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the Tikhonov term towards the Miura start and the
-    smoothness of the boundary perturbation (lengths in units of the lattice spacing)."""
+    """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the
+    Tikhonov term towards the Miura start and the smoothness of the boundary perturbation
+    (lengths in units of the lattice spacing)."""
     q, t = rigid[:4], rigid[4:]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
@@ -305,8 +306,8 @@ class _MeanTree:
     mean a dense column (it enters every side constraint); CasADi colours Jacobians in one
     direction, so that row and column together cost a sweep per side (841 forward, 1601
     reverse colours at 20 x 20 panels). The tree adds about K / (branching - 1) unknowns
-    and keeps the colours near ``branching``; a running mean (one variable per side) did
-    the same with K unknowns, 12% of the KKT system at 20 x 20 panels.
+    and a few tens of colours; a running mean (one variable per side) did the same with K
+    unknowns, 12% of the KKT system at 20 x 20 panels.
     """
 
     def __init__(self, K: int, branching: int = 16):
@@ -416,12 +417,13 @@ def simultaneous(setup: Setup) -> NLP:
 
     Every equality row is local (a panel and its neighbours): the column factors of the fold
     multipliers are lifted (PHI, see :func:`_local_crease_quaternions`) and the mean side is
-    the root of a tree of partial means (P, see :class:`_MeanTree`), so the Jacobian
-    colours in a few tens of forward sweeps whatever the size. Solve it with ``mu_strategy = adaptive`` (or a small
-    ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1 the barrier terms
-    (hundreds of logs against a loss of about 0.05) pull this infeasible-path method towards
-    square panels and long sides (the central point at mu = 0.1 has all angles in
-    [1.53, 1.61] and sides 8x the spacing), where it loses feasibility and never returns.
+    the root of a tree of partial means (P, see :class:`_MeanTree`), so the Jacobian colours
+    in a few tens of forward sweeps whatever the size. Solve it with ``mu_strategy =
+    adaptive`` (or a small ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1
+    the barrier terms (hundreds of logs against a loss of about 0.05) pull this
+    infeasible-path method towards square panels and long sides (the central point at mu =
+    0.1 has all angles in [1.53, 1.61] and sides 8x the spacing), where it loses feasibility
+    and never returns.
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M

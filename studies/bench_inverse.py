@@ -60,7 +60,8 @@ LAYOUT = "zigzag_i"  # pinned (the package default and the bundled targets' sinc
 def problem(n: int, **kw) -> DesignProblem:
     kw.setdefault("layout", LAYOUT)
     kw.setdefault("transcription", "sequential")  # Part A compares the sequential NLP
-    return replace(DesignProblem.load(TARGET), panels=(n, n), stop_rms=None, **kw)
+    kw.setdefault("stop_rms", None)
+    return replace(DesignProblem.load(TARGET), panels=(n, n), **kw)
 
 
 # ------------------------------------------------------------------ IPOPT in a subprocess
@@ -73,10 +74,12 @@ def vm_hwm_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def child(n: int, transcription: str, time_limit: float | None, max_iter: int) -> dict:
+def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
+          stop_rms: float | None = None) -> dict:
     """One IPOPT solve; returns a JSON-ready dict (runs in its own process)."""
     rss0 = vm_hwm_mb()
-    prob = problem(n, transcription=transcription, time_limit=time_limit, max_iter=max_iter)
+    prob = problem(n, transcription=transcription, time_limit=time_limit, max_iter=max_iter,
+                   stop_rms=stop_rms)
     t0 = time.perf_counter()
     c0 = time.process_time()
     out: dict = {"n": n, "transcription": transcription}
@@ -99,9 +102,9 @@ def child(n: int, transcription: str, time_limit: float | None, max_iter: int) -
 
 
 def run_child(n: int, transcription: str, time_limit: float | None = None,
-              max_iter: int = 1000) -> dict:
+              max_iter: int = 1000, stop_rms: float | None = None) -> dict:
     cmd = [sys.executable, __file__, "--child", str(n), transcription,
-           str(time_limit or 0), str(max_iter), LAYOUT]
+           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0)]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode:
         raise RuntimeError(f"child {cmd} failed:\n{proc.stderr[-3000:]}")
@@ -439,6 +442,6 @@ if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         n, tr, tl, mi = int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), int(sys.argv[5])
         LAYOUT = sys.argv[6]
-        print(json.dumps(child(n, tr, tl or None, mi)))
+        print(json.dumps(child(n, tr, tl or None, mi, float(sys.argv[7]) or None)))
     else:
         main()
