@@ -302,13 +302,7 @@ class DesignProblem:
         if self.hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         elif self.hessian == "gauss-newton":
-            J = ca.jacobian(nlp.residuals, nlp.x)
-            lam_f = ca.MX.sym("lam_f")
-            lam_g = ca.MX.sym("lam_g", nlp.g.numel())
-            p = ca.MX.sym("p", 0)
-            opts["hess_lag"] = ca.Function(
-                "nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
-                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+            opts["hess_lag"] = transcription.gauss_newton_hessian(nlp)
         elif nlp.parts is not None:
             opts["hess_lag"] = transcription.lagrangian_hessian(nlp)
         log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start))

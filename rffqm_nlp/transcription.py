@@ -65,15 +65,33 @@ def lagrangian_hessian(nlp: NLP) -> ca.Function:
     has dense rows; CasADi's star colouring of the whole Hessian grows like their degree
     squared (68% of the 13 s build at 60 x 60 panels). Here only the local block is
     coloured; the global rows are the Jacobian of grad_global L (8 rows). The build at
-    80 x 80 panels took 7 s instead of 34.
+    80 x 80 panels took 7 s instead of 34 (studies/bench_build.py).
     """
     local, glob = nlp.parts
+
+    def hessian(lam_f, lam_g):
+        L = lam_f * 0.5 * ca.sumsqr(nlp.residuals) + ca.dot(lam_g, nlp.g)
+        grad = ca.gradient(L, glob)
+        cross = ca.jacobian(grad, local)
+        return ca.blockcat([[ca.hessian(L, local)[0], cross.T],
+                            [cross, ca.jacobian(grad, glob)]])
+
+    return _hess_lag(nlp, hessian)
+
+
+def gauss_newton_hessian(nlp: NLP) -> ca.Function:
+    """IPOPT's ``hess_lag`` for the Gauss-Newton approximation: lam_f J' J, J the Jacobian
+    of the residuals (the constraints' curvature is dropped)."""
+    J = ca.jacobian(nlp.residuals, nlp.x)
+    return _hess_lag(nlp, lambda lam_f, lam_g: lam_f * ca.mtimes(J.T, J))
+
+
+def _hess_lag(nlp: NLP, hessian) -> ca.Function:
+    """The Function IPOPT's CasADi interface takes as ``hess_lag``: (x, p, lam_f, lam_g) ->
+    the upper triangle of ``hessian(lam_f, lam_g)``."""
     lam_f, lam_g, p = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp.g.numel()), ca.MX.sym("p", 0)
-    L = lam_f * 0.5 * ca.sumsqr(nlp.residuals) + ca.dot(lam_g, nlp.g)
-    grad = ca.gradient(L, glob)
-    cross = ca.jacobian(grad, local)
-    H = ca.blockcat([[ca.hessian(L, local)[0], cross.T], [cross, ca.jacobian(grad, glob)]])
-    return ca.Function("nlp_hess_l", [nlp.x, p, lam_f, lam_g], [ca.triu(H)],
+    return ca.Function("nlp_hess_l", [nlp.x, p, lam_f, lam_g],
+                       [ca.triu(hessian(lam_f, lam_g))],
                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
 

@@ -126,6 +126,24 @@ def test_nlp_derivatives_match_finite_differences(transcription):
                                        atol=1e-6 * np.abs(exact).max())
 
 
+@pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
+def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
+    prob = small("quarter_vase", hessian="gauss-newton", transcription=transcription)
+    nlp = prob.transcribe()
+    x = nlp.x0 + 1e-3 * np.random.default_rng(2).normal(size=nlp.x0.size)
+    res = ca.Function("r", [nlp.x], [nlp.residuals])
+    h, eye = 1e-6, np.eye(x.size)
+    J = np.column_stack([(res(x + h * e) - res(x - h * e)).full().ravel() / (2 * h)
+                         for e in eye])
+    H = rq.transcription.gauss_newton_hessian(nlp)(x, [], 0.7, np.ones(nlp.g.numel()))
+    expected = np.triu(0.7 * J.T @ J)
+    np.testing.assert_allclose(np.array(ca.densify(H).full()), expected,
+                               atol=1e-6 * np.abs(expected).max())
+    out = prob.solve()
+    assert out.stats["success"] and out.stats["hessian"] == "gauss-newton"
+    assert out.fit["rms"] < 0.25 * out.fit["plane_rms"] and out.fit["rms"] < 0.02
+
+
 @settings(max_examples=50, deadline=None)
 @given(st.integers(2, 3000), st.integers(2, 20), st.randoms(use_true_random=False))
 def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd):
