@@ -285,7 +285,7 @@ class DesignProblem:
 
     def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
                 verbose: bool, warm: bool = False):
-        f = 0.5 * ca.sumsqr(nlp.residuals)
+        f = nlp.objective
         opts: dict[str, Any] = {
             "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
             "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
@@ -473,7 +473,7 @@ class _IterationLog(ca.Callback):
         self._lbx, self._ubx = nlp.lbx, nlp.ubx
         self._project = nlp.project
         if nlp.project is not None:
-            self._fg = ca.Function("fg", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])
+            self._fg = ca.Function("fg", [nlp.x], [nlp.objective, nlp.g])
         self._history = history
         self._callback = callback
         self._t0 = time.perf_counter()

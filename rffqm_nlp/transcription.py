@@ -56,6 +56,11 @@ class NLP:
     #: variables couple with every panel; see :func:`lagrangian_hessian`
     parts: tuple[ca.MX, ca.MX] | None = None
 
+    @property
+    def objective(self) -> ca.MX:
+        """f(x) = 0.5 |res(x)|^2."""
+        return 0.5 * ca.sumsqr(self.residuals)
+
 
 def lagrangian_hessian(nlp: NLP) -> ca.Function:
     """IPOPT's ``hess_lag`` for an NLP with ``parts``: the Hessian of
@@ -70,7 +75,7 @@ def lagrangian_hessian(nlp: NLP) -> ca.Function:
     local, glob = nlp.parts
 
     def hessian(lam_f, lam_g):
-        L = lam_f * 0.5 * ca.sumsqr(nlp.residuals) + ca.dot(lam_g, nlp.g)
+        L = lam_f * nlp.objective + ca.dot(lam_g, nlp.g)
         grad = ca.gradient(L, glob)
         cross = ca.jacobian(grad, local)
         return ca.blockcat([[ca.hessian(L, local)[0], cross.T],
