@@ -30,6 +30,9 @@ DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1, "smooth
 TRANSCRIPTIONS = ("sequential", "simultaneous")
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
+#: IPOPT options that a DesignProblem field (or solve's ``verbose``) sets, and that field.
+IPOPT_FIELDS = {"max_iter": "max_iter", "tol": "tol", "max_wall_time": "time_limit",
+                "hessian_approximation": "hessian", "print_level": "solve(verbose=...)"}
 #: Largest sequential pattern (panels) whose NLP is expanded to SX; see DesignProblem._expand.
 SX_MAX_PANELS = 144
 #: IPOPT's barrier from a cold start. The loss is O(0.1) against hundreds of log-barrier
@@ -102,7 +105,12 @@ class DesignProblem:
       re-marched (see :class:`_IterationLog`): the bundled 20 x 20 targets stop after 22, 11
       and 11 iterations instead of 40, 36 and 31;
     * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
-      None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start).
+      None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start);
+    * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01},
+      or "output_file" with "file_print_level"), applied last; checked against IPOPT when
+      the problem is made. Options that a field above sets (:data:`IPOPT_FIELDS`) are
+      refused. Which start options pay off depends on the target and size
+      (studies/results/ipopt_start.md), so the defaults stay IPOPT's.
     """
 
     target: surfaces.Surface
@@ -124,6 +132,7 @@ class DesignProblem:
     time_limit: float | None = None
     stop_rms: float | None = None
     barrier_init: float | None = None
+    ipopt_options: dict[str, str | int | float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
@@ -168,6 +177,7 @@ class DesignProblem:
             raise InputError(f"barrier_init must be positive or None, got {self.barrier_init}")
         if self.max_iter < 1 or not self.tol > 0:
             raise InputError("max_iter must be >= 1 and tol > 0")
+        object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
 
     @property
     def N(self) -> int:
@@ -299,6 +309,7 @@ class DesignProblem:
                          "ipopt.bound_frac": 1e-9})
         else:
             opts.update(COLD_BARRIER[self.transcription])
+        opts.update({f"ipopt.{name}": value for name, value in self.ipopt_options.items()})
         if self.hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         elif self.hessian == "gauss-newton":
@@ -394,6 +405,7 @@ class DesignProblem:
         design["omega_bounds"] = list(self.omega_bounds)
         design["fix"] = list(self.fix)
         design["continuation"] = list(self.continuation)
+        design["ipopt_options"] = dict(self.ipopt_options)
         if design["time_limit"] is None:
             design.pop("time_limit")
         return {"target": self.target.to_config(), "design": design}
@@ -431,6 +443,36 @@ def design_fit(coarse: np.ndarray, target_points: np.ndarray,
     surface = shape.relative_fit(coarse, target)
     return {"rms": rms / diameter, "rms_surface": surface["rms"],
             "hausdorff": surface["hausdorff"], "plane_rms": float(plane / diameter)}
+
+
+def _ipopt_options(options: dict) -> dict[str, str | int | float]:
+    """``options`` with any "ipopt." prefix dropped, checked by building a small IPOPT
+    solver with them (CasADi rejects unknown names, IPOPT values of the wrong type or out
+    of range)."""
+    if not isinstance(options, dict):
+        raise InputError(f"ipopt_options must be a dict of IPOPT options, got {options!r}")
+    out: dict[str, str | int | float] = {}
+    for key, value in options.items():
+        name = str(key).removeprefix("ipopt.")
+        if name in IPOPT_FIELDS:
+            raise InputError(f"ipopt_options: set {name} through DesignProblem's "
+                             f"{IPOPT_FIELDS[name]}, not ipopt_options")
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise InputError(f"ipopt_options: {name} = {value!r} must be a number or a string "
+                             "(IPOPT's yes/no options take 'yes' or 'no')")
+        out[name] = value
+    if out:
+        x = ca.MX.sym("x")
+        try:
+            ca.nlpsol("ipopt_options", "ipopt", {"x": x, "f": x * x},
+                      {**{f"ipopt.{k}": v for k, v in out.items()}, "ipopt.sb": "yes",
+                       "ipopt.print_level": 0, "print_time": False})
+        except RuntimeError as exc:
+            reason = str(exc).strip().splitlines()[-1].split(": ", 1)[-1]
+            if reason.startswith("Invalid options"):
+                reason += " It printed which and why above."
+            raise InputError(f"IPOPT rejects ipopt_options {out}: {reason}") from None
+    return out
 
 
 def _choice(name: str, value: str, options: tuple[str, ...]) -> None:

@@ -246,6 +246,36 @@ def test_invalid_options_raise_input_error(kw):
         small("sphere_cap", **kw)
 
 
+@pytest.mark.parametrize("options, match", [
+    ({"no_such_option": 1}, "No such IPOPT option: no_such_option"),
+    ({"mu_strategy": "fastest"}, "Invalid options"),
+    ({"bound_mult_init_val": -1.0}, "Invalid options"),
+    ({"ipopt.tol": 1e-3}, "through DesignProblem's tol"),
+    ({"max_wall_time": 10.0}, "through DesignProblem's time_limit"),
+    ({"warm_start_init_point": True}, "'yes' or 'no'"),
+    ("mu_init=1e-3", "must be a dict")])
+def test_invalid_ipopt_options_are_refused_when_the_problem_is_made(options, match):
+    with pytest.raises(rq.InputError, match=match):
+        small("sphere_cap", ipopt_options=options)
+
+
+def test_ipopt_options_reach_ipopt_and_survive_the_config_round_trip(tmp_path):
+    log = tmp_path / "ipopt.out"
+    prob = small("hyperboloid", stop_rms=0.02, ipopt_options={
+        "ipopt.output_file": str(log), "file_print_level": 6, "bound_mult_init_val": 0.01})
+    assert prob.ipopt_options == {"output_file": str(log), "file_print_level": 6,
+                                  "bound_mult_init_val": 0.01}
+    assert DesignProblem.from_config(prob.to_config()).to_config() == prob.to_config()
+    toml = tmp_path / "design.toml"
+    toml.write_text('[target]\nname = "hyperboloid"\n[design.ipopt_options]\n'
+                    'bound_mult_init_method = "mu-based"\n')
+    assert DesignProblem.load(toml).ipopt_options == {"bound_mult_init_method": "mu-based"}
+    res = prob.solve()
+    text = log.read_text()
+    assert "bound_mult_init_val = 0.01" in text  # IPOPT's list of the options it used
+    assert text.count("Number of trial factorizations performed") >= res.stats["iterations"]
+
+
 def test_fixed_groups_stay_at_start():
     prob = small("sphere_cap", fix=("lengths", "omega"), max_iter=30, tol=1e-2)
     nlp = prob.transcribe()
