@@ -234,8 +234,8 @@ class Bench:
                 for op in ("fold", "fold_many"):
                     self.cells[(n, op, path)] = Cell(est=self.estimate(n, op, path))
                 continue
-            Y = self.measure(n, "fold", path, lambda: fold(pat, OMEGA))
-            Ym = self.measure(n, "fold_many", path, lambda: fold_many(pat))
+            Y = self.measure(n, "fold", path, lambda pat=pat: fold(pat, OMEGA))
+            Ym = self.measure(n, "fold_many", path, lambda pat=pat: fold_many(pat))
             results[path] = (pat.X, Y, None if Ym is None else Ym[[0, -1]])
             del pat, Y, Ym
             gc.collect()
