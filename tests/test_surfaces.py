@@ -9,6 +9,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
 from rffqm_nlp.errors import SurfaceError
@@ -201,6 +202,22 @@ def test_diameter_of_cap_and_plane():
     corners = cap.point(np.array([0.6, -0.6]), np.array([0.6, -0.6]))
     assert cap.diameter() == pytest.approx(np.linalg.norm(corners[0] - corners[1]), rel=1e-12)
     assert S.get("plane").diameter() == pytest.approx(4 * math.sqrt(2), rel=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 400), shape=st.sampled_from(["ball", "sphere", "flat", "line"]),
+       seed=st.integers(0, 2**32 - 1))
+def test_point_set_diameter_is_the_largest_pairwise_distance(n, shape, seed):
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(n, 3)) * rng.uniform(0.1, 10, size=3)
+    if shape == "sphere":  # every point a hull vertex, as on a convex cap
+        pts /= np.linalg.norm(pts, axis=1, keepdims=True)
+    elif shape == "flat":
+        pts[:, 2] = 0.0
+    elif shape == "line":
+        pts = np.outer(rng.normal(size=n), rng.normal(size=3)) + rng.normal(size=3)
+    brute = np.linalg.norm(pts[:, None] - pts[None], axis=-1).max()
+    assert S.point_set_diameter(pts) == pytest.approx(brute, rel=1e-12, abs=1e-300)
 
 
 @pytest.mark.parametrize("name, spacing", [("sphere_cap", (0.31, 0.27)),
