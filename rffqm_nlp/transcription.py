@@ -70,7 +70,7 @@ def lagrangian_hessian(nlp: NLP) -> ca.Function:
     has dense rows; CasADi's star colouring of the whole Hessian grows like their degree
     squared (68% of the 13 s build at 60 x 60 panels). Here only the local block is
     coloured; the global rows are the Jacobian of grad_global L (8 rows). The build at
-    80 x 80 panels took 7 s instead of 34 (studies/bench_build.py).
+    80 x 80 panels took 6 s instead of 34 (studies/bench_build.py).
     """
     local, glob = nlp.parts
 
