@@ -44,6 +44,11 @@ SX_MAX_PANELS = 144
 #: worse local minimum of the 8 x 8 sphere cap, which mu_init = 1e-3 does not.
 COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
                 "simultaneous": {"ipopt.mu_strategy": "adaptive"}}
+#: Most iterations of the damped Gauss-Newton Hessian before the exact one takes over (see
+#: DesignProblem._phases). The 20 x 20 sphere cap reaches 0.9% after 23-26.
+GAUSS_NEWTON_ITERATIONS = 30
+#: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton
+FINAL_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded", "User_Requested_Stop")
 
 
 @dataclass(frozen=True)
@@ -95,15 +100,28 @@ class DesignProblem:
       the bundled targets at 8-16 panels a side, both layouts, the simultaneous one solved
       18 of 18 (the sequential one 16), 1.5-6.8x faster
       (studies/results/compare_transcriptions.md), and it converges at 40 x 40;
-      ``hessian``: "gauss-newton" (J^T J of the residuals), "exact" or "limited-memory"
-      (L-BFGS);
+      ``hessian``: "exact" (the default), "gauss-newton" or "limited-memory" (L-BFGS).
+      "gauss-newton" is J^T J of the residuals plus ``damping`` times a diagonal
+      Levenberg-Marquardt term (:func:`rffqm_nlp.transcription.gauss_newton_hessian`),
+      for at most :data:`GAUSS_NEWTON_ITERATIONS` iterations, after which the exact
+      Hessian takes over from the last iterate and its multipliers unless ``stop_rms`` was
+      reached or IPOPT converged (:meth:`_phases`). It factorises the KKT system once per
+      iteration instead of about twice: to stop_rms 0.9%, the bundled targets (whose files
+      choose it) took 0.7-1.9 s at 20 x 20 panels against 2.5-4.2 s with the exact
+      Hessian, and 3.6-8.7 s at 40 x 40 against 19-36 s (studies/results/solve_cost.md). At
+      100 x 100 the sphere cap did not reach 0.9% with it: its objective fell from 5.0 to
+      0.15 in 21 iterations, then rose, its iterates violating the marching equations by
+      0.01-0.02, so the exact Hessian stays the default;
+    * ``damping``: weight of the Levenberg-Marquardt term of "gauss-newton" (default 0.03;
+      without it the 20 x 20 sphere cap had not reached 0.9% after 380 iterations, with
+      0.02-0.04 it took 23-26, the hyperboloid and the quarter vase 4-5);
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
     * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
       the target lattice (a fraction of the target's diameter) with every constraint holding
       (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance. With the
       simultaneous transcription the designs judged are the iterates' boundary data
-      re-marched (see :class:`_IterationLog`): the bundled 20 x 20 targets stop after 22, 11
-      and 11 iterations instead of 40, 36 and 31;
+      re-marched (see :class:`_IterationLog`): with the exact Hessian the bundled 20 x 20
+      targets stop after 22, 11 and 11 iterations instead of 40, 36 and 31;
     * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
       None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start);
     * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01},
@@ -127,6 +145,7 @@ class DesignProblem:
     continuation: tuple[float, ...] = (1.0,)
     transcription: str = "simultaneous"
     hessian: str = "exact"
+    damping: float = 0.03
     max_iter: int = 1000
     tol: float = 1e-6
     time_limit: float | None = None
@@ -175,6 +194,8 @@ class DesignProblem:
                              f"got {self.stop_rms}")
         if self.barrier_init is not None and not self.barrier_init > 0:
             raise InputError(f"barrier_init must be positive or None, got {self.barrier_init}")
+        if not 0 <= self.damping < np.inf:
+            raise InputError(f"damping must be a finite number >= 0, got {self.damping}")
         if self.max_iter < 1 or not self.tol > 0:
             raise InputError("max_iter must be >= 1 and tol > 0")
         object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
@@ -263,27 +284,42 @@ class DesignProblem:
         x = None
         history: dict[str, list] = {"iter": [], "objective": [], "inf_pr": [], "elapsed": []}
         iterations, t_build = 0, 0.0
+        gauss_newton, log = 0, None
         for stage, factor in enumerate(self.continuation):
             weights = dict(self.weights, regularization=factor * self.weights["regularization"])
             t1 = time.perf_counter()
             nlp = self.transcribe(start, weights, warm_start if x is None else None)
             if x is None:
                 x = nlp.x0
-            solver, log = self._solver(nlp, start, history, callback, verbose,
-                                       warm=warm_start is not None or stage > 0)
             t_build += time.perf_counter() - t1
-            sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
-            stats = dict(solver.stats())
-            if log.reached:
-                stats.update(success=True, return_status="Fit_Reached")
-            x = log.reached_x if log.reached else sol["x"].full().ravel()
-            iterations += int(stats["iter_count"])
+            multipliers: dict[str, Any] = {}
+            for hessian, max_iter in self._phases(iterations):
+                t1 = time.perf_counter()
+                solver, log = self._solver(
+                    nlp, start, history, callback, verbose, hessian=hessian,
+                    max_iter=max_iter, elapsed=t1 - t0, best=log if multipliers else None,
+                    warm=warm_start is not None or stage > 0 or bool(multipliers),
+                    multipliers=bool(multipliers))
+                t_build += time.perf_counter() - t1
+                sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg,
+                             **multipliers)
+                stats = dict(solver.stats())
+                if log.reached:
+                    stats.update(success=True, return_status="Fit_Reached")
+                x = log.reached_x if log.reached else sol["x"].full().ravel()
+                iterations += int(stats["iter_count"])
+                if hessian == "gauss-newton":
+                    gauss_newton += int(stats["iter_count"])
+                if log.reached or stats["return_status"] in FINAL_STATUSES:
+                    break
+                multipliers = {"lam_g0": sol["lam_g"], "lam_x0": sol["lam_x"]}
             solve_stats = {"status": stats["return_status"], "success": bool(stats["success"]),
                            "iterations": iterations, "build_time": t_build,
                            "solve_time": time.perf_counter() - t0 - t_build,
                            "objective": log.reached_objective if log.reached
                            else float(sol["f"]), "history": history,
-                           "transcription": self.transcription, "hessian": self.hessian}
+                           "transcription": self.transcription, "hessian": self.hessian,
+                           "gauss_newton_iterations": gauss_newton}
             if not stats["success"] or log.reached:
                 break
         if not stats["success"]:
@@ -293,15 +329,33 @@ class DesignProblem:
                 "raise max_iter or time_limit, or relax tol", solve_stats, x, log.best)
         return self._result(nlp, start, x, solve_stats)
 
+    def _phases(self, done: int) -> list[tuple[str, int]]:
+        """(Hessian, iteration limit) of each IPOPT run of one solve stage, ``done``
+        iterations having been spent by earlier stages.
+
+        With ``hessian = "gauss-newton"`` the damped Gauss-Newton runs first, for at most
+        :data:`GAUSS_NEWTON_ITERATIONS`; unless it reaches stop_rms or converges, the exact
+        Hessian takes over from its last iterate and multipliers. On its own it converges
+        only linearly: to IPOPT's tolerance the 20 x 20 sphere cap had not converged after
+        800 iterations, and the hyperboloid's and quarter vase's last iterates failed the
+        re-march check (folded states 6-8e-8 off the NumPy re-march, where 1e-8 is allowed).
+        """
+        left = self.max_iter - done
+        if self.hessian != "gauss-newton":
+            return [(self.hessian, left)]
+        first = min(GAUSS_NEWTON_ITERATIONS, left)
+        return [("gauss-newton", first)] + ([("exact", left - first)] if left > first else [])
+
     def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
-                verbose: bool, warm: bool = False):
+                verbose: bool, hessian: str, max_iter: int, elapsed: float = 0.0,
+                warm: bool = False, multipliers: bool = False, best=None):
         f = nlp.objective
         opts: dict[str, Any] = {
-            "ipopt.max_iter": self.max_iter, "ipopt.tol": self.tol,
+            "ipopt.max_iter": max_iter, "ipopt.tol": self.tol,
             "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
             "print_time": verbose, "ipopt.sb": "yes", "expand": self._expand()}
         if self.time_limit is not None:
-            opts["ipopt.max_wall_time"] = float(self.time_limit)
+            opts["ipopt.max_wall_time"] = max(float(self.time_limit) - elapsed, 1e-3)
         if warm or self.barrier_init is not None:
             # near an optimum a small barrier keeps IPOPT from wandering off
             mu_init = 1e-6 if self.barrier_init is None else self.barrier_init
@@ -309,14 +363,16 @@ class DesignProblem:
                          "ipopt.bound_frac": 1e-9})
         else:
             opts.update(COLD_BARRIER[self.transcription])
+        if multipliers:
+            opts["ipopt.warm_start_init_point"] = "yes"
         opts.update({f"ipopt.{name}": value for name, value in self.ipopt_options.items()})
-        if self.hessian == "limited-memory":
+        if hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
-        elif self.hessian == "gauss-newton":
-            opts["hess_lag"] = transcription.gauss_newton_hessian(nlp)
+        elif hessian == "gauss-newton":
+            opts["hess_lag"] = transcription.gauss_newton_hessian(nlp, self.damping)
         elif nlp.parts is not None:
             opts["hess_lag"] = transcription.lagrangian_hessian(nlp)
-        log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start))
+        log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start), best)
         opts["iteration_callback"] = log
         solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
@@ -502,14 +558,16 @@ class _IterationLog(ca.Callback):
     #: constraint violation below which an iterate counts as feasible for ``stop``
     FEASIBLE = 1e-9
 
-    def __init__(self, nlp: transcription.NLP, history: dict, callback, stop=None):
+    def __init__(self, nlp: transcription.NLP, history: dict, callback, stop=None,
+                 previous: "_IterationLog | None" = None):
         ca.Callback.__init__(self)
         self._stop = stop
         self.reached = False
         self.reached_x: np.ndarray | None = None
         self.reached_objective = np.nan
-        self.best: np.ndarray | None = None
-        self._best_objective = np.inf
+        # the best admissible iterate so far, of this run or of an earlier run on the same NLP
+        self.best: np.ndarray | None = None if previous is None else previous.best
+        self._best_objective = np.inf if previous is None else previous._best_objective
         self._nx, self._ng = nlp.x.numel(), nlp.g.numel()
         self._lbg, self._ubg = nlp.lbg, nlp.ubg
         self._lbx, self._ubx = nlp.lbx, nlp.ubx

@@ -37,7 +37,7 @@ def child(n: int, method: str) -> dict:
     if method == "casadi":
         nlp.parts = None  # no hess_lag: CasADi builds the Hessian itself
     prob._solver(nlp, start, {"iter": [], "objective": [], "inf_pr": [], "elapsed": []},
-                 None, False)
+                 None, False, hessian="exact", max_iter=prob.max_iter)
     return {"n": n, "method": method, "build": time.perf_counter() - t0,
             "variables": nlp.x.numel()}
 

@@ -88,7 +88,8 @@ def main() -> None:
         for name in TARGETS:
             base = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
                            layout=LAYOUT, stop_rms=None, time_limit=args.time_limit,
-                           transcription="sequential")  # measures() reads its x
+                           transcription="sequential",  # measures() reads its x
+                           hessian="exact")
             start = base.start()
             x0 = base.transcribe(start).x0
             m0 = measures(base, start, x0)

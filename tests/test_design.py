@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import numpy_model, surfaces, transcription
+from rffqm_nlp import design, numpy_model, surfaces, transcription
 from rffqm_nlp import vertex as vx
 from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.results import DesignResult
@@ -135,13 +135,36 @@ def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
     h, eye = 1e-6, np.eye(x.size)
     J = np.column_stack([(res(x + h * e) - res(x - h * e)).full().ravel() / (2 * h)
                          for e in eye])
-    H = rq.transcription.gauss_newton_hessian(nlp)(x, [], 0.7, np.ones(nlp.g.numel()))
-    expected = np.triu(0.7 * J.T @ J)
-    np.testing.assert_allclose(np.array(ca.densify(H).full()), expected,
-                               atol=1e-6 * np.abs(expected).max())
+    for damping in (0.0, 0.05):
+        H = rq.transcription.gauss_newton_hessian(nlp, damping)(x, [], 0.7,
+                                                                 np.ones(nlp.g.numel()))
+        expected = np.triu(0.7 * (J.T @ J + damping * np.diag(nlp.damping_weights)))
+        np.testing.assert_allclose(np.array(ca.densify(H).full()), expected,
+                                   atol=1e-6 * np.abs(expected).max())
     out = prob.solve()
     assert out.stats["success"] and out.stats["hessian"] == "gauss-newton"
     assert out.fit["rms"] < 0.25 * out.fit["plane_rms"] and out.fit["rms"] < 0.02
+
+
+def test_gauss_newton_hands_over_to_the_exact_hessian_unless_it_is_done():
+    phases = small("sphere_cap", hessian="gauss-newton")._phases
+    n = design.GAUSS_NEWTON_ITERATIONS
+    assert phases(0) == [("gauss-newton", n), ("exact", 1000 - n)]
+    assert phases(1000 - n + 5) == [("gauss-newton", n - 5)]
+    assert small("sphere_cap", hessian="exact")._phases(10) == [("exact", 990)]
+    # To IPOPT's tolerance: Gauss-Newton first, then the exact Hessian to the same optimum.
+    exact = small("quarter_vase", hessian="exact").solve()
+    both = small("quarter_vase", hessian="gauss-newton").solve()
+    assert both.stats["status"] == "Solve_Succeeded"
+    assert 0 < both.stats["gauss_newton_iterations"] < both.stats["iterations"]
+    # the same optimal loss, to IPOPT's tolerance (the runs end at different barrier
+    # parameters, and the optimum is flat enough that the folded states differ by 0.5%)
+    assert both.stats["objective"] == pytest.approx(exact.stats["objective"], rel=1e-4)
+    assert both.fit["rms"] == pytest.approx(exact.fit["rms"], rel=1e-2)
+    # stop_rms reached by Gauss-Newton alone: no exact run.
+    fit = small("hyperboloid", hessian="gauss-newton", stop_rms=0.01).solve()
+    assert fit.stats["status"] == "Fit_Reached" and fit.fit["rms"] <= 0.01
+    assert fit.stats["gauss_newton_iterations"] == fit.stats["iterations"]
 
 
 @settings(max_examples=50, deadline=None)
@@ -238,9 +261,35 @@ def test_unreachable_min_length_reports_infeasibility():
         small("sphere_cap", min_length=1.5).solve()
 
 
+@pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
+def test_damping_weights_count_lengths_in_spacings_and_follow_the_target_size(transcription):
+    """D = 1 / (s^2 n): s the spacing for lengths and positions, 1 for angles and
+    quaternions; a target 10x larger divides the length weights by 100 and keeps the rest."""
+    weights = []
+    for radius in (4.0, 40.0):
+        prob = small("sphere_cap", transcription=transcription,
+                     target=rq.surfaces.get("sphere_cap", radius=radius,
+                                            domain=((-0.6, 0.6), (-0.6, 0.6))))
+        start = prob.start()
+        nlp = prob.transcribe(start)
+        D = nlp.damping_weights
+        n = start.target_points.shape[0] * start.target_points.shape[1]
+        assert D.shape == nlp.x0.shape
+        np.testing.assert_allclose(np.unique(np.round(D * n, 12)),
+                                   np.sort([1.0, 1 / start.spacing ** 2]), rtol=1e-9)
+        weights.append(D)
+        lengths = ~np.isclose(D * n, 1.0)
+        assert lengths[nlp.groups["lengths"]].all()
+        assert not lengths[nlp.groups["angles"]].any() and not lengths[nlp.groups["omega"]]
+    np.testing.assert_allclose(weights[1][lengths], weights[0][lengths] / 100, rtol=1e-9)
+    np.testing.assert_allclose(weights[1][~lengths], weights[0][~lengths], rtol=1e-12)
+
+
 @pytest.mark.parametrize("kw", [{"panels": (7, 8)}, {"layout": "diagonal"}, {"hessian": "bfgs"},
                                 {"fix": ("everything",)}, {"weights": {"shape": 1.0}},
-                                {"omega0": 3.5}, {"alpha0": 2.0}, {"min_angle": 1.0}])
+                                {"omega0": 3.5}, {"alpha0": 2.0}, {"min_angle": 1.0},
+                                {"damping": -0.1}, {"damping": float("inf")},
+                                {"damping": float("nan")}])
 def test_invalid_options_raise_input_error(kw):
     with pytest.raises(rq.InputError):
         small("sphere_cap", **kw)

@@ -1,0 +1,155 @@
+"""Where a design's time goes: transcription and Hessian, and BLAS threads.
+
+The first table solves the bundled targets with their target files' options (stop_rms
+0.9%) in each transcription with the exact and the damped Gauss-Newton Hessian (at 20 x 20
+panels; at 40 x 40 the simultaneous transcription only), and splits IPOPT's time (its own
+timing statistics) into the linear solves (factorisation and back-solves of the KKT system,
+MUMPS) and the NLP function evaluations (CasADi: objective, constraints and their
+derivatives). The simultaneous NLP with the exact Hessian (the library's default) is the
+baseline of the speed-up column.
+
+The second table solves the 40 x 40 sphere cap with one and with two OpenBLAS threads
+(MUMPS's dense kernels run in CasADi's OpenBLAS) and reports wall time against CPU time.
+Each run is a fresh subprocess.
+
+    python studies/solve_cost.py [--out studies/results/solve_cost.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import casadi as ca
+
+from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, DesignProblem
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
+CONFIGS = {20: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"),
+                ("sequential", "exact"), ("sequential", "gauss-newton")),
+           40: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"))}
+TIME_LIMIT = 120.0
+#: IPOPT's timing statistics: "<name>.....: cpu (sys: s wall: w)"
+TIMING = re.compile(r"^\s*(\w[\w ]*?)\.+:\s+[\d.]+ \(sys:\s+[\d.]+ wall:\s+([\d.]+)\)")
+
+
+def child(name: str, n: int, transcription: str, hessian: str) -> dict:
+    import rffqm_nlp as rq
+
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "ipopt.out"
+        prob = replace(rq.DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
+                       panels=(n, n), transcription=transcription, hessian=hessian,
+                       time_limit=TIME_LIMIT,
+                       ipopt_options={"output_file": str(log), "file_print_level": 6,
+                                      "print_timing_statistics": "yes"})
+        t0 = time.perf_counter()
+        try:
+            res = prob.solve()
+            out = {"status": res.stats["status"], "iterations": res.stats["iterations"],
+                   "build": res.stats["build_time"], "rms": res.fit["rms"],
+                   "min_side": res.fit["min_side_over_mean"],
+                   "gauss_newton": res.stats["gauss_newton_iterations"]}
+        except Exception as exc:  # a failed run is a result here
+            out = {"status": type(exc).__name__, "iterations": None, "build": None,
+                   "rms": None, "min_side": None, "gauss_newton": None}
+        out["wall"] = time.perf_counter() - t0
+        text = log.read_text()
+    timing = {m.group(1): float(m.group(2)) for line in text.splitlines()
+              if (m := TIMING.match(line))}
+    out["linear"] = timing.get("PDSystemSolverSolveOnce")
+    out["functions"] = timing.get("Function Evaluations")
+    out["factorizations"] = sum(int(m) for m in re.findall(
+        r"Number of trial factorizations performed: (\d+)", text))
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    out["cpu_user"], out["cpu_sys"] = usage.ru_utime, usage.ru_stime
+    return out
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "solve_cost.md")
+    args = ap.parse_args()
+    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+
+    def run(*argv: str, threads: int | None = None) -> dict:
+        env = dict(os.environ)
+        if threads is not None:
+            env["OPENBLAS_NUM_THREADS"] = str(threads)
+        proc = subprocess.run([sys.executable, __file__, "--child", *argv], capture_output=True,
+                              text=True, check=True, cwd=ROOT, env=env)
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    rows, totals = [], {}
+    for n, configs in CONFIGS.items():
+        for name in TARGETS:
+            for transcription, hessian in configs:
+                r = run(name, str(n), transcription, hessian)
+                rms = "-" if r["rms"] is None else f"{100 * r['rms']:.2f}%"
+                its = "-" if r["iterations"] is None else (
+                    f"{r['iterations']}" + (f" ({r['gauss_newton']} GN)"
+                                            if hessian == "gauss-newton" else ""))
+                rows.append(f"| {n}x{n} | {name} | {transcription} | {hessian} | {its} | "
+                            f"{r['factorizations']} | {_fmt(r['build'], '.2f')} | "
+                            f"{_fmt(r['linear'], '.2f')} | {_fmt(r['functions'], '.2f')} | "
+                            f"{r['wall']:.2f} | {r['status']} | {rms} | "
+                            f"{_fmt(r['min_side'], '.3f')} |")
+                totals.setdefault((n, transcription, hessian), []).append(r["wall"])
+                print(rows[-1], flush=True)
+    total_rows = [f"| {n}x{n} | {t} | {h} | {sum(w):.1f} | "
+                  f"{sum(totals[(n, 'simultaneous', 'exact')]) / sum(w):.2f}x |"
+                  for (n, t, h), w in totals.items()]
+    thread_rows = []
+    for threads in (1, 2):
+        r = run("sphere_cap", "40", "simultaneous", "exact", threads=threads)
+        thread_rows.append(f"| {threads} | {r['iterations'] or '-'} | {r['wall']:.1f} | "
+                           f"{_fmt(r['linear'], '.1f')} | {r['cpu_user']:.1f} | "
+                           f"{r['cpu_sys']:.1f} | {r['status']} |")
+        print(thread_rows[-1], flush=True)
+    text = "\n".join([
+        "# Where a design's time goes (`studies/solve_cost.py`)", "",
+        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} "
+        f"CPUs; CasADi {ca.__version__}; load average (1 min) {load0:.1f} at start, "
+        f"{os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        "- problem: the bundled targets, their target files' options (stop_rms 0.9%), "
+        f"time limit {TIME_LIMIT:.0f} s; Gauss-Newton damping {DesignProblem.damping} "
+        f"for at most {GAUSS_NEWTON_ITERATIONS} iterations, then exact; one fresh "
+        "subprocess per run", "",
+        "## Transcription and Hessian", "",
+        "iterations: all, in parentheses those with the Gauss-Newton Hessian; build: "
+        "transcription and solver construction; linear solves and NLP functions: IPOPT's "
+        "timing statistics (wall seconds in the KKT solves and in CasADi's evaluations); "
+        "wall: seconds of `prob.solve()`", "",
+        "| panels | target | transcription | Hessian | iterations | factorisations | "
+        "build [s] | linear solves [s] | NLP functions [s] | wall [s] | status | RMS/diam | "
+        "min side/mean |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
+        "| panels | transcription | Hessian | wall over the three targets [s] | speed-up vs "
+        "simultaneous, exact |", "|---|---|---|---|---|", *total_rows, "",
+        "## OpenBLAS threads, 40x40 sphere cap (simultaneous, exact)", "",
+        "CPU: user and system seconds of the whole subprocess", "",
+        "| threads | iterations | wall [s] | linear solves [s] | CPU user [s] | "
+        "CPU system [s] | status |", "|---|---|---|---|---|---|---|", *thread_rows, ""])
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 6 and sys.argv[1] == "--child":
+        print(json.dumps(child(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5])))
+    else:
+        main()
