@@ -107,11 +107,12 @@ class DesignProblem:
       Hessian takes over from the last iterate and its multipliers unless ``stop_rms`` was
       reached or IPOPT converged (:meth:`_phases`). It factorises the KKT system once per
       iteration instead of about twice: to stop_rms 0.9%, the bundled targets (whose files
-      choose it) took 0.7-1.9 s at 20 x 20 panels against 2.5-4.2 s with the exact
-      Hessian, and 3.6-8.7 s at 40 x 40 against 19-36 s (studies/results/solve_cost.md). At
-      100 x 100 the sphere cap did not reach 0.9% with it: its objective fell from 5.0 to
-      0.15 in 21 iterations, then rose, its iterates violating the marching equations by
-      0.01-0.02, so the exact Hessian stays the default;
+      choose it) took 0.7-1.9 s at 20 x 20 panels against 2.6-4.2 s with the exact
+      Hessian, 3.5-7.7 s at 40 x 40 against 19-32 s, and 42-85 s at 100 x 100 for two of
+      them (studies/results/solve_cost.md). The 100 x 100 sphere cap did not reach 0.9%
+      with it (its objective fell from 5.0 to 0.15 in 21 iterations, then rose, its
+      iterates violating the marching equations by 0.01-0.02) where the exact Hessian
+      takes 367 s, so the exact Hessian stays the default;
     * ``damping``: weight of the Levenberg-Marquardt term of "gauss-newton" (default 0.03;
       without it the 20 x 20 sphere cap had not reached 0.9% after 380 iterations, with
       0.02-0.04 it took 23-26, the hyperboloid and the quarter vase 4-5);

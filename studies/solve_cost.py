@@ -103,7 +103,7 @@ def main() -> None:
         return json.loads(proc.stdout.strip().splitlines()[-1])
 
     rows, totals = [], {}
-    sizes = dict(CONFIGS, **{n: CONFIGS[40] for n in args.large})
+    sizes = {**CONFIGS, **{n: CONFIGS[40] for n in args.large}}
     for n, configs in sizes.items():
         for name in TARGETS:
             for transcription, hessian in configs:
