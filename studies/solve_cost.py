@@ -13,6 +13,8 @@ The second table solves the 40 x 40 sphere cap with one and with two OpenBLAS th
 Each run is a fresh subprocess.
 
     python studies/solve_cost.py [--large 100] [--out studies/results/solve_cost.md]
+    python studies/solve_cost.py --child quarter_vase 200 simultaneous gauss-newton 1800
+        (one design; prints its row as JSON; the last number is the time limit in s)
 """
 
 from __future__ import annotations
@@ -46,14 +48,13 @@ LARGE_TIME_LIMIT = 600.0
 TIMING = re.compile(r"^\s*(\w[\w ]*?)\.+:\s+[\d.]+ \(sys:\s+[\d.]+ wall:\s+([\d.]+)\)")
 
 
-def child(name: str, n: int, transcription: str, hessian: str) -> dict:
-    import rffqm_nlp as rq
-
+def child(name: str, n: int, transcription: str, hessian: str,
+          time_limit: float | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
-        prob = replace(rq.DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
+        prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
                        panels=(n, n), transcription=transcription, hessian=hessian,
-                       time_limit=TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
+                       time_limit=time_limit or TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
                        ipopt_options={"output_file": str(log), "file_print_level": 6,
                                       "file_append": "yes",  # both runs of a handover
                                       "print_timing_statistics": "yes"})
@@ -78,6 +79,7 @@ def child(name: str, n: int, transcription: str, hessian: str) -> dict:
         r"Number of trial factorizations performed: (\d+)", text))
     usage = resource.getrusage(resource.RUSAGE_SELF)
     out["cpu_user"], out["cpu_sys"] = usage.ru_utime, usage.ru_stime
+    out["peak_gb"] = usage.ru_maxrss / 2 ** 20  # kB on Linux
     return out
 
 
@@ -158,7 +160,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 6 and sys.argv[1] == "--child":
-        print(json.dumps(child(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5])))
+    if len(sys.argv) in (6, 7) and sys.argv[1] == "--child":
+        print(json.dumps(child(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5],
+                               *map(float, sys.argv[6:]))))
     else:
         main()
