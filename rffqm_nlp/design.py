@@ -47,8 +47,9 @@ COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
 #: Most iterations of the damped Gauss-Newton Hessian before the exact one takes over (see
 #: DesignProblem._phases). The 20 x 20 sphere cap reaches 0.9% after 23-26.
 GAUSS_NEWTON_ITERATIONS = 30
-#: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton
-FINAL_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded", "User_Requested_Stop")
+#: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
+#: does it after stop_rms is reached)
+FINAL_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
 
 
 @dataclass(frozen=True)
