@@ -34,6 +34,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from bench_inverse import fmt
 from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, DesignProblem
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -83,10 +84,6 @@ def child(name: str, n: int, transcription: str, hessian: str,
     return out
 
 
-def _fmt(value, spec: str) -> str:
-    return "-" if value is None else format(value, spec)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "solve_cost.md")
@@ -115,10 +112,10 @@ def main() -> None:
                     f"{r['iterations']}" + (f" ({r['gauss_newton']} GN)"
                                             if hessian == "gauss-newton" else ""))
                 rows.append(f"| {n}x{n} | {name} | {transcription} | {hessian} | {its} | "
-                            f"{r['factorizations']} | {_fmt(r['build'], '.2f')} | "
-                            f"{_fmt(r['linear'], '.2f')} | {_fmt(r['functions'], '.2f')} | "
+                            f"{r['factorizations']} | {fmt(r['build'], '.2f')} | "
+                            f"{fmt(r['linear'], '.2f')} | {fmt(r['functions'], '.2f')} | "
                             f"{r['wall']:.2f} | {r['status']} | {rms} | "
-                            f"{_fmt(r['min_side'], '.3f')} |")
+                            f"{fmt(r['min_side'], '.3f')} |")
                 totals.setdefault((n, transcription, hessian), []).append(r["wall"])
                 print(rows[-1], flush=True)
     total_rows = [f"| {n}x{n} | {t} | {h} | {sum(w):.1f} | "
@@ -128,7 +125,7 @@ def main() -> None:
     for threads in (1, 2):
         r = run("sphere_cap", "40", "simultaneous", "exact", threads=threads)
         thread_rows.append(f"| {threads} | {r['iterations'] or '-'} | {r['wall']:.1f} | "
-                           f"{_fmt(r['linear'], '.1f')} | {r['cpu_user']:.1f} | "
+                           f"{fmt(r['linear'], '.1f')} | {r['cpu_user']:.1f} | "
                            f"{r['cpu_sys']:.1f} | {r['status']} |")
         print(thread_rows[-1], flush=True)
     text = "\n".join([
