@@ -49,7 +49,7 @@ from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import RffqmError, SolverFailed
 
 ROOT = Path(__file__).resolve().parent.parent
-TARGET = ROOT / "targets" / "sphere_cap.toml"
+TARGET = "sphere_cap"  # a bundled target file, targets/<TARGET>.toml
 LARGE = 1e6  # objective value of a boundary vector that does not march
 FEASIBLE = 1e-9  # constraint violation of a feasible IPOPT iterate (design._IterationLog)
 
@@ -57,12 +57,13 @@ FEASIBLE = 1e-9  # constraint violation of a feasible IPOPT iterate (design._Ite
 LAYOUT = "zigzag_i"  # pinned (the package default and the bundled targets' since 945512b)
 
 
-def problem(n: int, **kw) -> DesignProblem:
+def problem(n: int, target: str = TARGET, **kw) -> DesignProblem:
     kw.setdefault("layout", LAYOUT)
     kw.setdefault("transcription", "sequential")  # Part A compares the sequential NLP
     kw.setdefault("stop_rms", None)
     kw.setdefault("hessian", "exact")  # the target file's Gauss-Newton came later
-    return replace(DesignProblem.load(TARGET), panels=(n, n), **kw)
+    return replace(DesignProblem.load(ROOT / "targets" / f"{target}.toml"), panels=(n, n),
+                   **kw)
 
 
 # ------------------------------------------------------------------ IPOPT in a subprocess
@@ -76,11 +77,12 @@ def vm_hwm_mb() -> float:
 
 
 def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
-          stop_rms: float | None = None) -> dict:
+          stop_rms: float | None = None, target: str = TARGET,
+          hessian: str = "exact") -> dict:
     """One IPOPT solve; returns a JSON-ready dict (runs in its own process)."""
     rss0 = vm_hwm_mb()
-    prob = problem(n, transcription=transcription, time_limit=time_limit, max_iter=max_iter,
-                   stop_rms=stop_rms)
+    prob = problem(n, target, transcription=transcription, time_limit=time_limit,
+                   max_iter=max_iter, stop_rms=stop_rms, hessian=hessian)
     t0 = time.perf_counter()
     c0 = time.process_time()
     out: dict = {"n": n, "transcription": transcription}
@@ -103,9 +105,10 @@ def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
 
 
 def run_child(n: int, transcription: str, time_limit: float | None = None,
-              max_iter: int = 1000, stop_rms: float | None = None) -> dict:
+              max_iter: int = 1000, stop_rms: float | None = None, target: str = TARGET,
+              hessian: str = "exact") -> dict:
     cmd = [sys.executable, __file__, "--child", str(n), transcription,
-           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0)]
+           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0), target, hessian]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode:
         raise RuntimeError(f"child {cmd} failed:\n{proc.stderr[-3000:]}")
@@ -443,6 +446,7 @@ if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         n, tr, tl, mi = int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), int(sys.argv[5])
         LAYOUT = sys.argv[6]
-        print(json.dumps(child(n, tr, tl or None, mi, float(sys.argv[7]) or None)))
+        print(json.dumps(child(n, tr, tl or None, mi, float(sys.argv[7]) or None,
+                               *sys.argv[8:10])))
     else:
         main()
