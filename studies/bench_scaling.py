@@ -1,6 +1,6 @@
 """Scaling of the two transcriptions: time, iterations and peak memory against pattern size.
 
-A bundled target (``--target``, default the sphere cap; the library's default options, the
+A bundled target (``--target``, default the sphere cap; its target file's options, with the
 exact Hessian unless ``--hessian`` says otherwise) at n x n panels, run to IPOPT's
 tolerance (stop_rms=None) or, with ``--stop-rms``, until a re-marched iterate fits that
 well (the target files' 0.9% is what the README's main job uses),
