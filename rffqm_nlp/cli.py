@@ -1,6 +1,6 @@
 """The ``rffqm`` command: thin wrappers that parse, call the library and write files.
 
-Commands: ``design`` (inverse design of a TOML target, with live IPOPT progress), ``sweep``
+Commands: ``design`` (inverse design of a TOML target, with live solver progress), ``sweep``
 (a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
 serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export`` and ``render`` (of a
 saved design result), ``targets`` (the built-in surfaces) and ``march`` (forward marching of
@@ -265,8 +265,8 @@ def design(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No live progress display."),
     force: bool = typer.Option(False, "--force", help="Write into a non-empty output folder "
                                "(same-named files are replaced)."),
-    max_iter: Optional[int] = typer.Option(None, "--max-iter", min=1, help="IPOPT iteration "
-                                           "limit (overrides the file's max_iter)."),
+    max_iter: Optional[int] = typer.Option(None, "--max-iter", min=1, help="Iteration limit "
+                                           "(overrides the file's max_iter)."),
     panels: Optional[str] = typer.Option(None, "--panels", metavar="2N 2M",
                                          help="Pattern size, two even numbers >= 4: "
                                          "'--panels 20 20' or '--panels 20,20' (overrides "
@@ -274,8 +274,9 @@ def design(
 ) -> None:
     """Design a crease pattern that folds into the target surface of TARGET.
 
-    Solves the inverse problem with IPOPT (live progress: iteration, objective, constraint
-    violation, elapsed time), prints the fit, and writes into OUT: result.json (the saved
+    Solves the inverse problem with the file's solver, IPOPT or Levenberg-Marquardt on the
+    marching manifold (live progress: iteration, objective, constraint violation, elapsed
+    time), prints the fit, and writes into OUT: result.json (the saved
     result), pattern.fold (24 states from flat to the designed omega), crease.svg/.pdf/.dxf,
     folded.obj/.glb, render.png and folding.gif (when off-screen rendering works) and
     convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
@@ -299,6 +300,10 @@ def design(
     Console().print(_summary(result, out))
 
 
+#: progress label of each DesignProblem.solver
+SOLVER_NAMES = {"ipopt": "IPOPT", "levenberg-marquardt": "Levenberg-Marquardt"}
+
+
 def _solve(problem: "DesignProblem", quiet: bool) -> "DesignResult":
     """Solve, with a live progress display unless ``quiet`` (on a terminal; elsewhere, as
     in a log file, a plain line every few seconds)."""
@@ -318,7 +323,7 @@ def _solve(problem: "DesignProblem", quiet: bool) -> "DesignResult":
                                  inf_pr="-")
 
         def update(entry: dict) -> None:
-            progress.update(task, description="IPOPT", iter=entry["iter"],
+            progress.update(task, description=SOLVER_NAMES[problem.solver], iter=entry["iter"],
                             objective=f"{entry['objective']:.4e}",
                             inf_pr=f"{entry['inf_pr']:.2e}")
 
@@ -332,7 +337,7 @@ def _solve_logged(problem: "DesignProblem", every: float = 10.0) -> "DesignResul
     def update(entry: dict) -> None:
         if entry["elapsed"] - last[0] >= every:
             last[0] = entry["elapsed"]
-            console.print(f"IPOPT iteration {entry['iter']}: objective "
+            console.print(f"{SOLVER_NAMES[problem.solver]} iteration {entry['iter']}: objective "
                           f"{entry['objective']:.4e}, violation {entry['inf_pr']:.2e}, "
                           f"{entry['elapsed']:.0f} s", highlight=False)
 

@@ -57,6 +57,10 @@ class NLP:
     parts: tuple[ca.MX, ca.MX] | None = None
     #: diagonal D of the Levenberg-Marquardt term of :func:`gauss_newton_hessian`
     damping_weights: np.ndarray | None = None
+    #: indices in x of the design (boundary data, omega, alignment) from which the rest
+    #: marches, and of every sector angle and side: see :mod:`rffqm_nlp.reduced`
+    design_index: np.ndarray | None = None
+    pattern_index: np.ndarray | None = None
 
     @property
     def objective(self) -> ca.MX:
@@ -569,9 +573,13 @@ def simultaneous(setup: Setup) -> NLP:
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
         lengths[lay.slices[name]] = True
     lengths[lay.size - 3:] = True  # the translation of the alignment, last in x
+    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
+                                           for n in names])
+    design = np.concatenate([*groups.values(), block("rigid")])
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
-               damping_weights=damping_weights(setup, lengths))
+               damping_weights=damping_weights(setup, lengths), design_index=design,
+               pattern_index=block("A", "B", "LH", "LV"))
 
 
 def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):

@@ -62,6 +62,7 @@ def problem(n: int, target: str = TARGET, **kw) -> DesignProblem:
     kw.setdefault("transcription", "sequential")  # Part A compares the sequential NLP
     kw.setdefault("stop_rms", None)
     kw.setdefault("hessian", "exact")  # the target file's Gauss-Newton came later
+    kw.setdefault("solver", "ipopt")  # and its Levenberg-Marquardt later still
     return replace(DesignProblem.load(ROOT / "targets" / f"{target}.toml"), panels=(n, n),
                    **kw)
 
@@ -78,14 +79,14 @@ def vm_hwm_mb() -> float:
 
 def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
           stop_rms: float | None = None, target: str = TARGET,
-          hessian: str = "exact") -> dict:
-    """One IPOPT solve; returns a JSON-ready dict (runs in its own process)."""
+          hessian: str = "exact", solver: str = "ipopt") -> dict:
+    """One design solve; returns a JSON-ready dict (runs in its own process)."""
     rss0 = vm_hwm_mb()
     prob = problem(n, target, transcription=transcription, time_limit=time_limit,
-                   max_iter=max_iter, stop_rms=stop_rms, hessian=hessian)
+                   max_iter=max_iter, stop_rms=stop_rms, hessian=hessian, solver=solver)
     t0 = time.perf_counter()
     c0 = time.process_time()
-    out: dict = {"n": n, "transcription": transcription}
+    out: dict = {"n": n, "transcription": transcription, "solver": solver}
     try:
         res = prob.solve()
         stats, x = res.stats, res.x
@@ -106,9 +107,10 @@ def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
 
 def run_child(n: int, transcription: str, time_limit: float | None = None,
               max_iter: int = 1000, stop_rms: float | None = None, target: str = TARGET,
-              hessian: str = "exact") -> dict:
+              hessian: str = "exact", solver: str = "ipopt") -> dict:
     cmd = [sys.executable, __file__, "--child", str(n), transcription,
-           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0), target, hessian]
+           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0), target, hessian,
+           solver]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode:
         raise RuntimeError(f"child {cmd} failed:\n{proc.stderr[-3000:]}")
@@ -447,6 +449,6 @@ if __name__ == "__main__":
         n, tr, tl, mi = int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), int(sys.argv[5])
         LAYOUT = sys.argv[6]
         print(json.dumps(child(n, tr, tl or None, mi, float(sys.argv[7]) or None,
-                               *sys.argv[8:10])))
+                               *sys.argv[8:11])))
     else:
         main()

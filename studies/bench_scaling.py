@@ -1,20 +1,25 @@
-"""Scaling of the two transcriptions: time, iterations and peak memory against pattern size.
+"""Scaling of the transcriptions and solvers: time, iterations and peak memory against size.
 
-A bundled target (``--target``, default the sphere cap; its target file's options, with the
-exact Hessian unless ``--hessian`` says otherwise) at n x n panels, run to IPOPT's
-tolerance (stop_rms=None) or, with ``--stop-rms``, until a re-marched iterate fits that
-well (the target files' 0.9% is what the README's main job uses),
-each (size, transcription) solved by ``DesignProblem.solve()`` in a fresh subprocess
-(``bench_inverse.run_child``) so its time and peak memory are its own. Runs above
-``--limit-from`` panels get an IPOPT wall-time limit of ``--time-limit`` seconds; a run that
-hits it is reported with its status, not dropped. The ratio column compares each
-simultaneous run with the sequential run of the same size in the same run of this script.
+A bundled target (``--target``, default the sphere cap; its target file's options, with
+IPOPT and the exact Hessian unless ``--hessian`` says otherwise) at n x n panels, run to
+IPOPT's tolerance (stop_rms=None) or, with ``--stop-rms``, until a re-marched iterate fits
+that well (the target files' 0.9% is what the README's main job uses). Two methods per
+size: the sequential and the simultaneous transcription with IPOPT, or, with ``--solver
+levenberg-marquardt``, IPOPT and Levenberg-Marquardt on the marching manifold, both on the
+simultaneous NLP. ``--simultaneous-only`` sizes run the second method only. Each run is
+``DesignProblem.solve()`` in a fresh subprocess (``bench_inverse.run_child``) so its time
+and peak memory are its own. Runs above ``--limit-from`` panels get a wall-time limit of
+``--time-limit`` seconds; a run that hits it is reported with its status, not dropped. The
+ratio column compares the second method with the first at the same size in the same run.
 
     python studies/bench_scaling.py [--sizes 10 20 40] [--simultaneous-only 100]
         [--stop-rms 0.009] [--out studies/results/bench_scaling_stop.md]
     python studies/bench_scaling.py --target quarter_vase --hessian gauss-newton
         --sizes 10 20 --simultaneous-only 40 100 200 --stop-rms 0.009 --time-limit 1800
         --out studies/results/bench_scaling_vase.md
+    python studies/bench_scaling.py --solver levenberg-marquardt --sizes 10 20 40 100
+        --simultaneous-only 200 --stop-rms 0.009 --time-limit 3600
+        --out studies/results/bench_scaling_lm.md
 """
 
 from __future__ import annotations
@@ -29,15 +34,20 @@ import casadi as ca
 import numpy as np
 
 from bench_inverse import TARGET, run_child
-from rffqm_nlp.design import HESSIANS
+from rffqm_nlp.design import HESSIANS, SOLVERS
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def label(transcription: str, solver: str) -> str:
+    return transcription if solver == "ipopt" else f"{transcription}, {solver}"
 
 
 def row(r: dict, ratio: str) -> str:
     fit = r.get("fit") or {}
     rms = f"{100 * fit['rms']:.2f}%" if "rms" in fit else "-"
-    return (f"| {r['n']}x{r['n']} | {r['transcription']} | {r['wall']:.1f} | "
+    return (f"| {r['n']}x{r['n']} | {label(r['transcription'], r['solver'])} | "
+            f"{r['wall']:.1f} | "
             f"{r['build_time']:.1f} | {r['iterations']} | {r['status']} | "
             f"{r['objective']:.6g} | {rms} | {r['peak_rss_mb']:.0f} | {ratio} |")
 
@@ -52,29 +62,32 @@ def main() -> None:
     ap.add_argument("--target", default=TARGET,
                     choices=sorted(p.stem for p in (ROOT / "targets").glob("*.toml")))
     ap.add_argument("--hessian", default="exact", choices=HESSIANS)
+    ap.add_argument("--solver", default="ipopt", choices=SOLVERS)
     ap.add_argument("--out", type=Path,
                     default=ROOT / "studies" / "results" / "bench_scaling.md")
     args = ap.parse_args()
     t0, load0 = time.perf_counter(), os.getloadavg()[0]
     rows = []
-    runs = [(n, tr) for n in args.sizes for tr in ("sequential", "simultaneous")]
-    runs += [(n, "simultaneous") for n in args.simultaneous_only]
+    methods = ((("sequential", "ipopt"), ("simultaneous", "ipopt")) if args.solver == "ipopt"
+               else (("simultaneous", "ipopt"), ("simultaneous", args.solver)))
+    runs = [(n, m) for n in args.sizes for m in methods]
+    runs += [(n, methods[1]) for n in args.simultaneous_only]
     wall: dict[int, float] = {}
-    for n, tr in runs:
+    for n, (tr, solver) in runs:
         limit = args.time_limit if n >= args.limit_from else None
-        print(f"== {n}x{n} {tr} (time limit {limit}) ...", flush=True)
+        print(f"== {n}x{n} {label(tr, solver)} (time limit {limit}) ...", flush=True)
         try:
             r = run_child(n, tr, time_limit=limit, stop_rms=args.stop_rms,
-                          target=args.target, hessian=args.hessian)
-        except RuntimeError as exc:  # the child failed outside IPOPT (error in its stderr)
-            rows.append(f"| {n}x{n} | {tr} | failed: {str(exc).splitlines()[-1][:200]} |")
+                          target=args.target, hessian=args.hessian, solver=solver)
+        except RuntimeError as exc:  # the child failed outside the solver (see its stderr)
+            rows.append(f"| {n}x{n} | {label(tr, solver)} | failed: "
+                        f"{str(exc).splitlines()[-1][:200]} |")
             print(rows[-1], flush=True)
             continue
-        ok = r["success"]
-        if tr == "sequential" and ok:
+        ok, second = r["success"], (tr, solver) == methods[1]
+        if not second and ok:
             wall[n] = r["wall"]
-        ratio = (f"{wall[n] / r['wall']:.2f}x" if tr == "simultaneous" and ok and n in wall
-                 else "-")
+        ratio = f"{wall[n] / r['wall']:.2f}x" if second and ok and n in wall else "-"
         rows.append(row(r, ratio))
         print(rows[-1], flush=True)
     md = [
@@ -84,17 +97,17 @@ def main() -> None:
         f"NumPy {np.__version__}, CasADi {ca.__version__}; load average (1 min) {load0:.1f} at "
         f"start, {os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
         f"- problem: targets/{args.target}.toml at n x n panels, stop_rms={args.stop_rms}, "
-        f"the target file's other options, hessian={args.hessian!r} "
+        f"the target file's other options, hessian={args.hessian!r} (IPOPT) "
         "(sequential: SX derivatives up to 12 x 12 panels, MX above; "
         "simultaneous: MX); one fresh subprocess per run",
-        f"- IPOPT wall-time limit {args.time_limit:.0f} s for n >= {args.limit_from}; "
+        f"- wall-time limit {args.time_limit:.0f} s for n >= {args.limit_from}; "
         f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')} (BLAS threads of MUMPS)",
         "- wall = seconds of `prob.solve()` (start, build, solve, NumPy re-march, fit); "
-        "peak RSS = VmHWM of the run's own process; speed-up = sequential wall / "
-        "simultaneous wall at the same size",
+        f"peak RSS = VmHWM of the run's own process; speed-up = {label(*methods[0])} wall / "
+        f"{label(*methods[1])} wall at the same size",
         "",
-        "| panels | transcription | wall [s] | build [s] | iterations | status | objective "
-        "| RMS/diam | peak RSS [MB] | speed-up vs sequential |",
+        "| panels | method | wall [s] | build [s] | iterations | status | objective "
+        f"| RMS/diam | peak RSS [MB] | speed-up vs {label(*methods[0])} |",
         "|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",

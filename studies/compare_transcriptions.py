@@ -62,7 +62,8 @@ def main() -> None:
                 for layout in LAYOUTS:
                     prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
                                    panels=(n, n), layout=layout, stop_rms=None,
-                                   time_limit=args.time_limit, hessian="exact")
+                                   time_limit=args.time_limit, hessian="exact",
+                                   solver="ipopt")
                     seq, sim = (solve(replace(prob, transcription=tr)) for tr in TRANSCRIPTIONS)
                     ratio = (f"{seq['wall'] / sim['wall']:.1f}x"
                              if "objective" in seq and "objective" in sim else "-")

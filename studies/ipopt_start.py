@@ -45,7 +45,7 @@ def problem(name: str, n: int, options: dict):
     import rffqm_nlp as rq
 
     return replace(rq.DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
-                   hessian="exact", ipopt_options=options)
+                   hessian="exact", solver="ipopt", ipopt_options=options)
 
 
 def initial_multipliers(name: str, n: int, config: str) -> dict:

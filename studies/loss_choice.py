@@ -89,7 +89,7 @@ def main() -> None:
             base = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
                            layout=LAYOUT, stop_rms=None, time_limit=args.time_limit,
                            transcription="sequential",  # measures() reads its x
-                           hessian="exact")
+                           hessian="exact", solver="ipopt")
             start = base.start()
             x0 = base.transcribe(start).x0
             m0 = measures(base, start, x0)

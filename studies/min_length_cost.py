@@ -42,7 +42,7 @@ def main() -> None:
     T0, load0 = time.perf_counter(), os.getloadavg()[0]
     base = replace(DesignProblem.load(ROOT / "targets" / "sphere_cap.toml"),
                    stop_rms=None, time_limit=args.time_limit, transcription="sequential",
-                   hessian="exact")
+                   hessian="exact", solver="ipopt")
     rows, data = [], {}
     for layout, n in [(lay, n) for lay in LAYOUTS for n in args.sizes]:
         for ml in MIN_LENGTHS:

@@ -1,12 +1,13 @@
-"""Where a design's time goes: transcription and Hessian, and BLAS threads.
+"""Where a design's time goes: transcription, solver and Hessian, and BLAS threads.
 
 The first table solves the bundled targets with their target files' options (stop_rms
-0.9%) in each transcription with the exact and the damped Gauss-Newton Hessian (at 20 x 20
+0.9%) in each transcription with IPOPT and the exact or the damped Gauss-Newton Hessian,
+and with Levenberg-Marquardt on the marching manifold (simultaneous only; at 20 x 20
 panels; at 40 x 40, and at the ``--large`` sizes, the simultaneous transcription only),
 and splits IPOPT's time (its own timing statistics) into the linear solves (factorisation
 and back-solves of the KKT system, MUMPS) and the NLP function evaluations (CasADi:
-objective, constraints and their derivatives). The simultaneous NLP with the exact Hessian
-(the library's default) is the baseline of the speed-up column.
+objective, constraints and their derivatives). The simultaneous NLP with IPOPT and the
+exact Hessian (the library's default) is the baseline of the speed-up column.
 
 The second table solves the 40 x 40 sphere cap with one and with two OpenBLAS threads
 (MUMPS's dense kernels run in CasADi's OpenBLAS) and reports wall time against CPU time.
@@ -14,7 +15,8 @@ Each run is a fresh subprocess.
 
     python studies/solve_cost.py [--large 100] [--out studies/results/solve_cost.md]
     python studies/solve_cost.py --child quarter_vase 200 simultaneous gauss-newton 1800
-        (one design; prints its row as JSON; the last number is the time limit in s)
+        (one design; prints its row as JSON; the last number is the time limit in s;
+        the Hessian "levenberg-marquardt" stands for that solver)
 """
 
 from __future__ import annotations
@@ -39,9 +41,11 @@ from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, DesignProblem
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
+LM = "levenberg-marquardt"  # in the Hessian column: that solver (then IPOPT, exact, if needed)
 CONFIGS = {20: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"),
-                ("sequential", "exact"), ("sequential", "gauss-newton")),
-           40: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"))}
+                ("simultaneous", LM), ("sequential", "exact"), ("sequential", "gauss-newton")),
+           40: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"),
+                ("simultaneous", LM))}
 #: time limit of one solve, by pattern size (larger sizes: LARGE_TIME_LIMIT)
 TIME_LIMIT = {20: 120.0, 40: 120.0}
 LARGE_TIME_LIMIT = 600.0
@@ -53,8 +57,10 @@ def child(name: str, n: int, transcription: str, hessian: str,
           time_limit: float | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
+        solver = LM if hessian == LM else "ipopt"
         prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
-                       panels=(n, n), transcription=transcription, hessian=hessian,
+                       panels=(n, n), transcription=transcription, solver=solver,
+                       hessian="exact" if hessian == LM else hessian,
                        time_limit=time_limit or TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
                        ipopt_options={"output_file": str(log), "file_print_level": 6,
                                       "file_append": "yes",  # both runs of a handover
@@ -70,7 +76,7 @@ def child(name: str, n: int, transcription: str, hessian: str,
             out = {"status": type(exc).__name__, "iterations": None, "build": None,
                    "rms": None, "min_side": None, "gauss_newton": None}
         out["wall"] = time.perf_counter() - t0
-        text = log.read_text()
+        text = log.read_text() if log.exists() else ""  # no IPOPT run, no log
     timing: dict[str, float] = {}
     for m in filter(None, map(TIMING.match, text.splitlines())):
         timing[m.group(1)] = timing.get(m.group(1), 0.0) + float(m.group(2))
@@ -88,7 +94,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "solve_cost.md")
     ap.add_argument("--large", type=int, nargs="*", default=[],
-                    help="also these n x n sizes, simultaneous transcription, both Hessians "
+                    help="also these n x n sizes, simultaneous transcription, every solver "
                          f"({LARGE_TIME_LIMIT:.0f} s limit each)")
     args = ap.parse_args()
     t0, load0 = time.perf_counter(), os.getloadavg()[0]
@@ -138,11 +144,13 @@ def main() -> None:
         f"panels); Gauss-Newton damping {DesignProblem.damping} "
         f"for at most {GAUSS_NEWTON_ITERATIONS} iterations, then exact; one fresh "
         "subprocess per run", "",
-        "## Transcription and Hessian", "",
+        "## Transcription, solver and Hessian", "",
+        "Hessian: IPOPT's, or levenberg-marquardt for that solver (`rffqm_nlp.reduced`; "
+        "its sensitivities and QPs count in neither IPOPT column); "
         "iterations: all, in parentheses those with the Gauss-Newton Hessian; build: "
-        "transcription and solver construction; linear solves and NLP functions: IPOPT's "
-        "timing statistics (wall seconds in the KKT solves and in CasADi's evaluations); "
-        "wall: seconds of `prob.solve()`", "",
+        "transcription and IPOPT solver construction; linear solves and NLP functions: "
+        "IPOPT's timing statistics (wall seconds in the KKT solves and in CasADi's "
+        "evaluations); wall: seconds of `prob.solve()`", "",
         "| panels | target | transcription | Hessian | iterations | factorisations | "
         "build [s] | linear solves [s] | NLP functions [s] | wall [s] | status | RMS/diam | "
         "min side/mean |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",

@@ -151,6 +151,9 @@ def test_design_panels_two_words_and_progress_lines(tmp_path, monkeypatch):
     assert_user_error(res, "Stop_Here")
     assert seen["panels"] == (6, 4) and "IPOPT iteration" not in res.output
     assert not (tmp_path / "o").exists() and leftovers(tmp_path) == []
+    lm = write_toml(tmp_path, "lm.toml", 'solver = "levenberg-marquardt"')
+    res = invoke("design", lm, "--out", tmp_path / "o")
+    assert "Levenberg-Marquardt iteration 0" in res.output
 
 
 def test_design_without_rendering_warns_and_force_keeps_other_files(tmp_path, fake_solve,

@@ -17,8 +17,9 @@ TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
 
 
 def small(name: str, **kw) -> DesignProblem:
+    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_reduced.py)."""
     return replace(DesignProblem.load(f"targets/{name}.toml"),
-                   **{"panels": (8, 8), "stop_rms": None, **kw})
+                   **{"panels": (8, 8), "stop_rms": None, "solver": "ipopt", **kw})
 
 
 @pytest.fixture(scope="module", params=[(name, tr) for name in TARGETS

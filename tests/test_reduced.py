@@ -1,0 +1,154 @@
+"""Levenberg-Marquardt on the marching manifold (rffqm_nlp.reduced)."""
+
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import rffqm_nlp as rq
+from rffqm_nlp import numpy_model, reduced
+from rffqm_nlp.design import DesignProblem
+
+LM = "levenberg-marquardt"
+
+
+def small(name: str, **kw) -> DesignProblem:
+    return replace(DesignProblem.load(f"targets/{name}.toml"),
+                   **{"panels": (8, 8), "stop_rms": None, "solver": LM, **kw})
+
+
+@pytest.fixture(scope="module")
+def manifold():
+    prob = small("quarter_vase")
+    return prob, reduced.Manifold(prob.transcribe())
+
+
+def test_marching_equations_are_triangular_in_the_found_order(manifold):
+    _, man = manifold
+    p = man.point(man.nlp.x0)
+    C = p.G[man.eq][:, man.state].tocsr()
+    rows, cols = man._triangular_order(C)
+    assert sorted(rows) == list(range(man.eq.size)) and sorted(cols) == list(range(C.shape[1]))
+    T = C[rows][:, cols].tocoo()
+    assert np.all(T.row >= T.col)  # lower triangular
+    assert np.abs(T.diagonal()).min() > 1e-3  # each equation solves for its own unknown
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 2 ** 16))
+def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(manifold, seed):
+    """S = ds/dd and J_d + J_s S against central differences of the re-march, at a
+    perturbed (admissible) design."""
+    _, man = manifold
+    nlp, rng = man.nlp, np.random.default_rng(seed)
+    x = nlp.x0.copy()
+    x[man.design] += 1e-3 * rng.standard_normal(man.design.size)
+    x = nlp.project(x)
+    assert x is not None
+    S = man.sensitivity(man.point(x))
+    residuals = ca.Function("r", [nlp.x], [nlp.residuals])
+    J = man.point(x).J
+    Jr = J[:, man.design].toarray() + J[:, man.state] @ S
+    h = 1e-6
+    for k in rng.choice(man.design.size, 12, replace=False):
+        xp, xm = x.copy(), x.copy()
+        xp[man.design[k]] += h
+        xm[man.design[k]] -= h
+        xp, xm = nlp.project(xp), nlp.project(xm)
+        fd = (xp[man.state] - xm[man.state]) / (2 * h)
+        np.testing.assert_allclose(S[:, k], fd, atol=1e-6 * max(1.0, np.abs(fd).max()))
+        fd_r = (residuals(xp) - residuals(xm)).full().ravel() / (2 * h)
+        np.testing.assert_allclose(Jr[:, k], fd_r, atol=1e-6 * max(1.0, np.abs(fd_r).max()))
+
+
+@pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
+def test_levenberg_marquardt_then_ipopt_reach_ipopts_optimum(name):
+    prob = small(name, tol=1e-9, hessian="exact")
+    lm = prob.solve()
+    ipopt = replace(prob, solver="ipopt").solve()
+    assert lm.stats["status"] == "Solve_Succeeded" and lm.stats["solver"] == LM
+    assert 0 < lm.stats["marched_iterations"] <= lm.stats["iterations"]
+    assert lm.stats["objective"] == pytest.approx(ipopt.stats["objective"], rel=1e-6)
+    np.testing.assert_allclose(lm.folded[::2, ::2], ipopt.folded[::2, ::2],
+                               atol=1e-4 * prob.target.diameter())
+
+
+def test_every_step_is_an_admissible_design_with_a_lower_loss():
+    seen = []
+    res = small("sphere_cap", stop_rms=0.0125).solve(callback=seen.append)
+    assert res.stats["status"] == "Fit_Reached" and res.fit["rms"] <= 0.0125
+    assert res.stats["iterations"] == res.stats["marched_iterations"] == len(seen) > 1
+    objective = [e["objective"] for e in seen]
+    assert np.all(np.diff(objective) < 0)
+    assert max(e["inf_pr"] for e in seen) <= reduced.FEASIBLE
+    assert seen[-1]["objective"] == pytest.approx(res.stats["objective"], rel=1e-12)
+
+
+def test_an_active_side_bound_holds_on_the_remarch():
+    """min_length = 0.6, which the 8 x 8 sphere cap's best fit breaks (its smallest side is
+    0.54 of the mean): the QP keeps the smallest side at the bound on every re-march."""
+    prob = small("sphere_cap", min_length=0.6)
+    nlp = prob.transcribe()
+    out = reduced.levenberg_marquardt(nlp, nlp.x0, prob.damping, 100)
+    assert out.status == "Stalled" and out.iterations > 3
+    vec = nlp.unpack(out.x)[0].full().ravel()
+    sides = numpy_model.march(rq.BoundaryData.from_vector(
+        vec, prob.start().boundary.sigma, 8, 8)).side_lengths
+    assert 1 - 1e-9 <= sides.min() / sides.mean() / 0.6 <= 1 + 1e-6  # active, held
+    again = reduced.levenberg_marquardt(nlp, nlp.x0, prob.damping, 100)
+    assert again.objective == out.objective  # deterministic
+    looser = replace(prob, min_length=0.3).transcribe()
+    assert reduced.levenberg_marquardt(looser, looser.x0, prob.damping, 100).objective \
+        < out.objective  # the bound costs fit
+
+
+def test_fixed_groups_stay_at_their_start():
+    prob = small("hyperboloid", fix=("lengths", "omega"), stop_rms=0.02)
+    res = prob.solve()
+    start = prob.start()
+    for side in ("l_left", "l_bottom"):
+        np.testing.assert_array_equal(getattr(res.boundary, side), getattr(start.boundary, side))
+    assert res.omega == start.omega
+    assert res.stats["marched_iterations"] > 0
+
+
+def test_iteration_and_time_limits_raise_solver_failed_with_an_admissible_best():
+    prob = small("sphere_cap", max_iter=1, tol=1e-12)
+    with pytest.raises(rq.SolverFailed, match="Maximum_Iterations_Exceeded") as exc:
+        prob.solve()
+    nlp = prob.transcribe()
+    best = exc.value.best_iterate
+    F = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])
+    f, g = F(best)
+    g = g.full().ravel()
+    assert np.all(g >= nlp.lbg - 1e-9) and np.all(g <= nlp.ubg + 1e-9)
+    assert float(f) < float(F(nlp.x0)[0])  # one step, which lowered the loss
+    assert exc.value.stats["history"]["objective"] == [pytest.approx(float(f))]
+    with pytest.raises(rq.SolverFailed, match="Maximum_WallTime_Exceeded"):
+        small("sphere_cap", time_limit=1e-6).solve()
+
+
+@pytest.mark.parametrize("kw", [{"solver": "newton"}, {"transcription": "sequential"},
+                                {"damping": 0.0}])
+def test_invalid_solver_options_raise_input_error(kw):
+    with pytest.raises(rq.InputError):
+        small("sphere_cap", **kw)
+
+
+def test_an_inadmissible_start_takes_no_step_and_ipopt_solves_from_it(manifold):
+    _, man = manifold
+    x = man.nlp.x0.copy()
+    x[man.nlp.groups["angles"]] = 3.0  # every boundary angle near pi: does not march
+    out = reduced.levenberg_marquardt(man.nlp, x, 0.03, 10)
+    assert out.status == "Inadmissible_Start" and out.iterations == 0
+    np.testing.assert_array_equal(out.x, x)
+    # a Miura start whose sides break min_length (its smallest is 0.82 of the mean):
+    # IPOPT solves from it as it would without the Levenberg-Marquardt solver
+    prob = small("quarter_vase", min_length=0.9)
+    nlp = prob.transcribe()
+    assert reduced.levenberg_marquardt(nlp, nlp.x0, 0.03, 10).status == "Inadmissible_Start"
+    res = prob.solve()
+    assert res.stats["marched_iterations"] == 0 and res.stats["status"] == "Solve_Succeeded"
+    assert res.fit["min_side_over_mean"] >= 0.9 * (1 - 1e-6)
