@@ -115,7 +115,7 @@ class DesignProblem:
       them (studies/results/solve_cost.md). The 100 x 100 sphere cap did not reach 0.9%
       with it (its objective fell from 5.0 to 0.15 in 21 iterations, then rose, its
       iterates violating the marching equations by 0.01-0.02) where the exact Hessian
-      takes 367 s, so the exact Hessian stays the default;
+      takes 392 s, so the exact Hessian stays IPOPT's default;
     * ``solver``: "ipopt" (the default) or "levenberg-marquardt": Levenberg-Marquardt on
       the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only).
       Its variables are the boundary data, omega and the alignment; every iterate is
@@ -124,7 +124,7 @@ class DesignProblem:
       lowers the loss by 0.01% a step, IPOPT (with ``hessian``) finishes from its point.
       The bundled target files choose it: to their 0.9%, the three targets took 8, 2 and 2
       iterations and 0.4-0.7 s at 20 x 20 panels, and the sphere cap 6 iterations and
-      35 s at 100 x 100, where IPOPT took 367 s (studies/results/solve_cost.md);
+      39 s at 100 x 100, where IPOPT took 392 s (studies/results/solve_cost.md);
     * ``damping``: weight of the Levenberg-Marquardt term of "gauss-newton" (default 0.03;
       without it the 20 x 20 sphere cap had not reached 0.9% after 380 iterations, with
       0.02-0.04 it took 23-26, the hyperboloid and the quarter vase 4-5), and the first

@@ -58,6 +58,8 @@ MAX_DAMPING = 1e10
 #: an accepted step that lowers the loss by less than this fraction ends the run
 #: ("Stalled"): from there, IPOPT's Newton steps converge faster
 MIN_DECREASE = 1e-4
+#: rows of S per block of the metric's product
+ROWS = 65536
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: design columns per triangular solve (SuperLU solves a few right-hand sides at a time
@@ -203,7 +205,10 @@ def _model(man: Manifold, p: _Point) -> _Model | None:
         return None
     J = p.J
     Jr = J[:, man.design].toarray() + J[:, man.state] @ S
-    Sp = S[man.pattern] * np.sqrt(man.pattern_weights)[:, None]
+    M = np.diag(man.design_weights)
+    for k in range(0, man.pattern.size, ROWS):  # S_p' D_p S_p without a copy of S_p
+        Sp = S[man.pattern[k:k + ROWS]] * np.sqrt(man.pattern_weights[k:k + ROWS])[:, None]
+        M += Sp.T @ Sp
     nlp = man.nlp
     Gin = p.G[man.ineq]
     xd, xs = p.x[man.design], p.x[man.state]
@@ -212,7 +217,7 @@ def _model(man: Manifold, p: _Point) -> _Model | None:
                             nlp.lbx[man.design][bd] - xd[bd], nlp.lbx[man.state][bs] - xs[bs]])
     upper = np.concatenate([nlp.ubg[man.ineq] - p.g[man.ineq],
                             nlp.ubx[man.design][bd] - xd[bd], nlp.ubx[man.state][bs] - xs[bs]])
-    return _Model(H=Jr.T @ Jr, M=np.diag(man.design_weights) + Sp.T @ Sp, grad=Jr.T @ p.r,
+    return _Model(H=Jr.T @ Jr, M=M, grad=Jr.T @ p.r,
                   S=S, G_design=Gin[:, man.design].tocsr(), G_state=Gin[:, man.state].tocsr(),
                   lower=lower, upper=upper)
 
@@ -284,7 +289,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
 
     ``damping``: the first lam; ``deadline``: a ``time.perf_counter()`` after which the run
     stops; ``stop(x)``: end once it holds at an accepted iterate; ``callback(objective,
-    violation)`` after every accepted step.
+    violation)`` at the start and after every accepted step.
     """
     man = Manifold(nlp)
     start = nlp.project(np.asarray(x, dtype=float))
@@ -292,6 +297,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     if p is None or man.violation(p) > FEASIBLE:
         return Outcome(x=np.asarray(x, dtype=float), objective=None, iterations=0,
                        status="Inadmissible_Start")
+    if callback is not None:
+        callback(p.objective, man.violation(p))
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
     status = "Maximum_Iterations_Exceeded"
@@ -326,6 +333,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         else:
             status = "Stalled"
             break
+        del m  # its sensitivities (GBs for large patterns) before the next model's
         rho = (p.objective - trial.objective) / predicted
         lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
         decrease = (p.objective - trial.objective) / p.objective
