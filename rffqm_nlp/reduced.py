@@ -256,9 +256,10 @@ class _Steps:
         dd = np.linalg.solve(H, -m.grad)
         lower, upper = m.lower + shift, m.upper - shift
         work = shift > 0
+        solved = np.zeros(shift.size, dtype=bool)  # rows of the last QP: hold to its tolerance
         for _ in range(QP_ROUNDS):
             Ad = self.change(m, dd)
-            broken = ((Ad < lower) | (Ad > upper)) & ~work  # the QP's rows hold to its tolerance
+            broken = ((Ad < lower) | (Ad > upper)) & ~solved
             if not broken.any():
                 return dd
             work |= broken | (lower > -2 * np.abs(Ad)) | (upper < 2 * np.abs(Ad))
@@ -268,7 +269,7 @@ class _Steps:
                      uba=np.minimum(upper[which], 1e20))
             if not qp.stats()["success"]:
                 return None
-            dd = sol["x"].full().ravel()
+            dd, solved = sol["x"].full().ravel(), work.copy()
         return None
 
     def _qp(self, rows: int) -> ca.Function:
@@ -339,7 +340,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         decrease = (p.objective - trial.objective) / p.objective
         p, it = trial, it + 1
         if callback is not None:
-            callback(p.objective, man.violation(p))
+            callback(p.objective, violation)
         if stop is not None and stop(p.x):
             status = "Fit_Reached"
             break
