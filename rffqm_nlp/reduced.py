@@ -133,6 +133,8 @@ class Manifold:
         bounded = (np.isfinite(nlp.lbx) | np.isfinite(nlp.ubx)) & ~fixed
         self.bounded_design = np.flatnonzero(bounded[self.design])
         self.bounded_state = np.flatnonzero(bounded[self.state])
+        self.lower = self.inequalities(nlp.lbg, nlp.lbx)
+        self.upper = self.inequalities(nlp.ubg, nlp.ubx)
         self._order: tuple[np.ndarray, np.ndarray] | None = None
 
     # ---------------------------------------------------------------- linearisation
@@ -143,6 +145,12 @@ class Manifold:
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(g))):
             return None
         return _Point(x=x, r=r, g=g, J=J.sparse().tocsc(), G=G.sparse().tocsr())
+
+    def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The inequality rows of the reduced problem at (g, x): g's inequality rows, then
+        the bounded design, then the bounded state variables."""
+        return np.concatenate([g[self.ineq], x[self.design][self.bounded_design],
+                               x[self.state][self.bounded_state]])
 
     def violation(self, p: _Point) -> float:
         """Largest violation of the constraints and bounds at p."""
@@ -209,17 +217,11 @@ def _model(man: Manifold, p: _Point) -> _Model | None:
     for k in range(0, man.pattern.size, ROWS):  # S_p' D_p S_p without a copy of S_p
         Sp = S[man.pattern[k:k + ROWS]] * np.sqrt(man.pattern_weights[k:k + ROWS])[:, None]
         M += Sp.T @ Sp
-    nlp = man.nlp
     Gin = p.G[man.ineq]
-    xd, xs = p.x[man.design], p.x[man.state]
-    bd, bs = man.bounded_design, man.bounded_state
-    lower = np.concatenate([nlp.lbg[man.ineq] - p.g[man.ineq],
-                            nlp.lbx[man.design][bd] - xd[bd], nlp.lbx[man.state][bs] - xs[bs]])
-    upper = np.concatenate([nlp.ubg[man.ineq] - p.g[man.ineq],
-                            nlp.ubx[man.design][bd] - xd[bd], nlp.ubx[man.state][bs] - xs[bs]])
+    now = man.inequalities(p.g, p.x)
     return _Model(H=Jr.T @ Jr, M=M, grad=Jr.T @ p.r,
                   S=S, G_design=Gin[:, man.design].tocsr(), G_state=Gin[:, man.state].tocsr(),
-                  lower=lower, upper=upper)
+                  lower=man.lower - now, upper=man.upper - now)
 
 
 class _Steps:
@@ -354,13 +356,8 @@ def _linearization_error(man: Manifold, m: _Model, steps: _Steps, dd: np.ndarray
                          p: _Point, trial: _Point) -> np.ndarray:
     """Per inequality row broken at ``trial``: how far its linearised change A dd
     overestimated the slack gained (the second-order correction), plus a margin."""
-    nlp = man.nlp
-    xd, xs = trial.x[man.design] - p.x[man.design], trial.x[man.state] - p.x[man.state]
-    bd, bs = man.bounded_design, man.bounded_state
-    actual = np.concatenate([trial.g[man.ineq] - p.g[man.ineq], xd[bd], xs[bs]])
-    value = np.concatenate([trial.g[man.ineq], trial.x[man.design][bd], trial.x[man.state][bs]])
-    lo = np.concatenate([nlp.lbg[man.ineq], nlp.lbx[man.design][bd], nlp.lbx[man.state][bs]])
-    hi = np.concatenate([nlp.ubg[man.ineq], nlp.ubx[man.design][bd], nlp.ubx[man.state][bs]])
-    broken = (value < lo - FEASIBLE) | (value > hi + FEASIBLE)
+    value = man.inequalities(trial.g, trial.x)
+    actual = value - man.inequalities(p.g, p.x)
+    broken = (value < man.lower - FEASIBLE) | (value > man.upper + FEASIBLE)
     error = np.abs(steps.change(m, dd) - actual) + 10 * FEASIBLE
     return np.where(broken, error, 0.0)
