@@ -19,7 +19,7 @@ import numpy as np
 from . import vertex as vx
 from .boundary import BoundaryData
 from .errors import InputError, MarchingError
-from .pattern import Pattern
+from .pattern import Pattern, check_omega
 
 PI = np.pi
 #: The second check fails when | |mu_abc| - 1 | is at most this.
@@ -326,17 +326,6 @@ def march(bd: BoundaryData) -> Pattern:
         raise MarchingError(check, (i, j), detail)
     X = np.stack([Xx, Xy, np.zeros_like(Xx)], axis=-1)
     return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
-
-
-def check_omega(omega) -> np.ndarray:
-    """Validated fold parameter(s) as a float array; |omega| <= pi, finite."""
-    arr = np.asarray(omega, dtype=float)
-    if arr.ndim > 1:
-        raise InputError(f"omega must be a scalar or a 1-D array, got shape {arr.shape}")
-    bad = ~np.isfinite(arr) | (np.abs(arr) > PI)
-    if bad.any():
-        raise InputError(f"omega must lie in [-pi, pi], got {arr[bad].ravel()[0]!r}")
-    return arr
 
 
 def fold(pat: Pattern, omega) -> np.ndarray:

@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from .boundary import BoundaryData
-from .errors import InputError, MarchingError
-from .pattern import Pattern
+from .errors import MarchingError
+from .pattern import Pattern, check_omega
 
 #: | |mu_abc| - 1 | at or below this fails the second check (eq:secondCheck).
 SECOND_CHECK_TOL = 1e-12
@@ -256,15 +256,8 @@ def fold_angles(pat: Pattern, omega) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _omegas(omega) -> tuple[np.ndarray, bool]:
-    """omega as a 1-D float array and whether it was a scalar; validates [-pi, pi]."""
-    try:
-        w = np.asarray(omega, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"omega must be a number or an array of numbers: {exc}") from None
-    if w.ndim > 1:
-        raise InputError(f"omega must be a scalar or a 1-D array, got shape {w.shape}")
-    if not np.all(np.isfinite(w)) or np.any(np.abs(w) > np.pi):
-        raise InputError(f"omega must lie in [-pi, pi] (and not be NaN), got {omega!r}")
+    """omega validated by :func:`check_omega`, as a 1-D array (K,), and whether it was a scalar."""
+    w = check_omega(omega)
     return np.atleast_1d(w), w.ndim == 0
 
 

@@ -1,4 +1,5 @@
-"""The crease pattern produced by marching: one container shared by both forward models."""
+"""The crease pattern produced by marching (one container shared by both forward models)
+and the fold parameter omega's validator, :func:`check_omega`."""
 
 from __future__ import annotations
 
@@ -7,6 +8,30 @@ from dataclasses import dataclass
 import numpy as np
 
 from .boundary import BoundaryData
+from .errors import InputError
+
+
+def check_omega(omega, name: str = "omega") -> np.ndarray:
+    """The fold parameter(s) ``omega`` validated: a float array of shape () or (K,).
+
+    ``omega`` is gamma_1 of vertex (1, 1) (eq:foldParams): a finite number, or a 1-D
+    sequence of numbers, in [-pi, pi]. ``name`` is the argument or key named in the error.
+    Raises :class:`InputError` (one line) otherwise.
+    """
+    allowed = f"{name} must be a number or a non-empty 1-D list of numbers in [-pi, pi]"
+    try:
+        raw = np.asarray(omega)
+    except ValueError:  # ragged nested lists
+        raise InputError(f"{allowed}, got a ragged list") from None
+    if raw.dtype.kind not in "iuf":
+        raise InputError(f"{allowed}, got {type(omega).__name__}")
+    if raw.ndim > 1 or raw.size == 0:
+        raise InputError(f"{allowed}, got shape {raw.shape}")
+    arr = raw.astype(float)
+    bad = ~np.isfinite(arr) | (np.abs(arr) > np.pi)
+    if bad.any():
+        raise InputError(f"{name} must lie in [-pi, pi], got {float(arr[bad].ravel()[0])!r}")
+    return arr
 
 
 @dataclass(frozen=True)
