@@ -1,5 +1,5 @@
 """Discrete shape measures: coarse-graining, finite-difference fundamental forms, rigid
-alignment and distances between a folded lattice and its target (PAPER_NOTES s.8).
+alignment and distances between a folded lattice and its target (docs/paper.md s.8).
 
 Lattice arguments come in one of two forms, and results come back in the same form:
 
@@ -17,19 +17,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import directed_hausdorff
 
+from .backend import is_casadi, math_for
 from .errors import InputError
 from .surfaces import Surface, point_set_diameter
 
 Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
 Forms = tuple[Any, Any, Any, Any, Any, Any]
-
-_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
-
 
 # -- lattice representation ---------------------------------------------------------------
 
@@ -41,7 +38,7 @@ def _split(P: Lattice) -> tuple[list, bool]:
             raise InputError(f"a lattice array must have shape (n, m, 3), got {P.shape}")
         return [P[..., k] for k in range(3)], True
     if isinstance(P, Sequence) and len(P) == 3:
-        comps = [c if isinstance(c, _CASADI_TYPES) else np.asarray(c, dtype=float) for c in P]
+        comps = [c if is_casadi(c) else np.asarray(c, dtype=float) for c in P]
         if any(len(c.shape) != 2 or c.shape != comps[0].shape for c in comps):
             raise InputError("a lattice given by components needs three 2-D matrices of one "
                              f"shape, got shapes {[tuple(c.shape) for c in comps]}")
@@ -56,7 +53,8 @@ def _join(comps: Sequence[Any], stacked: bool) -> Any:
 
 
 def _sqrt(x: Any) -> Any:
-    return ca.sqrt(x) if isinstance(x, _CASADI_TYPES) else np.sqrt(x)
+    """Elementwise square root of a NumPy array or a CasADi matrix."""
+    return math_for(x).sqrt(x)
 
 
 def _dot(a: Sequence[Any], b: Sequence[Any]) -> Any:
@@ -74,7 +72,7 @@ def _shift(c: Any, di: int, dj: int, n: int, m: int, ci: int = 1, cj: int = 1) -
 
 def coarse_grain(Y: Lattice) -> Lattice:
     """r(i, j) = y^{(2i)(2j)}: every second vertex of a (2N+1, 2M+1) folded lattice, giving
-    (N+1, M+1) points (PAPER_NOTES s.8; indices from 0)."""
+    (N+1, M+1) points (docs/paper.md s.8; indices from 0)."""
     comps, stacked = _split(Y)
     n, m = comps[0].shape
     if n % 2 == 0 or m % 2 == 0:
@@ -96,7 +94,7 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
     M = r_uv.n, N = r_vv.n. Second-order accurate in hu, hv. The stencils skip the centre
     point in r_u, r_v and only see second differences through n, so this loss alone is blind
     to tangential offsets between the four parity classes (i mod 2, j mod 2): combine it with
-    :func:`edge_vectors` terms (PAPER_NOTES s.8).
+    :func:`edge_vectors` terms (docs/paper.md s.8).
     """
     comps, _ = _split(P)
     n, m = comps[0].shape
@@ -133,7 +131,7 @@ def edge_vectors(P: Lattice) -> tuple[Any, Any]:
     r[i, j+1] - r[i, j] for all n x (m-1) pairs along j, boundary included.
 
     Forward differences join neighbouring parity classes, so terms built on them (lengths,
-    directions) see the sideways offsets that central differences miss (PAPER_NOTES s.8).
+    directions) see the sideways offsets that central differences miss (docs/paper.md s.8).
     """
     comps, stacked = _split(P)
     d_i, d_j = _edges(comps)

@@ -1,4 +1,4 @@
-"""Parametric target surfaces r(u, v) for the inverse design (PAPER_NOTES s.8).
+"""Parametric target surfaces r(u, v) for the inverse design (docs/paper.md s.8).
 
 A surface is a map r(u, v) on a rectangular parameter domain ((u0, u1), (v0, v1)), written
 once with operations that work on NumPy arrays and on CasADi symbols alike (:func:`mathlib`).
@@ -36,18 +36,17 @@ import trimesh
 from scipy.optimize import brentq
 from scipy.spatial import ConvexHull, cKDTree
 
+from . import backend
 from .errors import SurfaceError
-from .io import read_toml
+from .files import read_toml
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
-_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
-_NUMPY_MATH = SimpleNamespace(sin=np.sin, cos=np.cos, tan=np.tan, sqrt=np.sqrt, exp=np.exp,
-                              log=np.log, sinh=np.sinh, cosh=np.cosh, tanh=np.tanh,
-                              atan2=np.arctan2, pi=math.pi)
-_CASADI_MATH = SimpleNamespace(sin=ca.sin, cos=ca.cos, tan=ca.tan, sqrt=ca.sqrt, exp=ca.exp,
-                               log=ca.log, sinh=ca.sinh, cosh=ca.cosh, tanh=ca.tanh,
-                               atan2=ca.atan2, pi=math.pi)
+#: The math for a surface function's arguments (``m = mathlib(u, v); m.sin(u)``): CasADi's
+#: functions if any argument is a CasADi object, else NumPy's. Both namespaces have ``sin,
+#: cos, tan, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, fabs, where, pi``. This is
+#: :func:`rffqm_nlp.backend.math_for`, under the name surface functions use.
+mathlib = backend.math_for
 
 #: Grid (per direction) on which a new surface is checked to be finite and regular.
 _CHECK_GRID = 21
@@ -55,14 +54,6 @@ _CHECK_GRID = 21
 _DIAMETER_GRID = 101
 #: |r_u x r_v| below this times mean |r_u| * mean |r_v| counts as singular.
 _REGULARITY_TOL = 1e-9
-
-
-def mathlib(*args: Any) -> SimpleNamespace:
-    """Math functions for ``args``: CasADi's if any argument is a CasADi type, else NumPy's.
-
-    Both namespaces have ``sin, cos, tan, sqrt, exp, log, sinh, cosh, tanh, atan2, pi``.
-    """
-    return _CASADI_MATH if any(isinstance(a, _CASADI_TYPES) for a in args) else _NUMPY_MATH
 
 
 class Surface:
@@ -192,7 +183,7 @@ class Surface:
 
     def lattice_uv(self, N: int, M: int,
                    spacing: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Parameters (u (N+1,), v (M+1,)) of the lattice (0..N) x (0..M) (PAPER_NOTES s.8).
+        """Parameters (u (N+1,), v (M+1,)) of the lattice (0..N) x (0..M) (docs/paper.md s.8).
 
         With ``spacing=None`` the lattice spans the whole domain, uniform in parameter space.
         With ``spacing=(s_i, s_j)`` it spans a sub-rectangle centred in the domain, uniform in
@@ -405,7 +396,7 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
             f"{what}; write it with CasADi-compatible math (casadi.sin, ..., or "
             f"rffqm_nlp.surfaces.mathlib)") from err
     try:
-        parts = ca.vertsplit(ca.vec(out)) if isinstance(out, _CASADI_TYPES) else list(out)
+        parts = ca.vertsplit(ca.vec(out)) if backend.is_casadi(out) else list(out)
         parts = [kind(p) for p in parts]
     except Exception:
         parts = None

@@ -1,8 +1,8 @@
 """One degree-4 vertex: fold-angle multipliers, fold-angle functions and the design formula.
 
-Every function is written once over array-like math and serves NumPy arrays and CasADi
-symbols alike. All forms are the smooth half-angle ones (PAPER_NOTES s.2): for the a-role
-sector angles (alpha, beta) and sign sigma,
+Every function is written once over the math of :func:`backend.math_for` and serves NumPy
+arrays and CasADi symbols alike. All forms are the smooth half-angle ones (docs/paper.md
+s.2): for the a-role sector angles (alpha, beta) and sign sigma,
 
     mu2^{-1}(alpha, beta) = cos((alpha - beta)/2) / cos((alpha + beta)/2),
     mu2^{+1}(alpha, beta) = -sin((alpha - beta)/2) / sin((alpha + beta)/2),
@@ -16,30 +16,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-_CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
-
-
-class _NumPyOps:
-    cos, sin, tan, atan, atan2, sqrt, fabs = (np.cos, np.sin, np.tan, np.arctan, np.arctan2,
-                                              np.sqrt, np.abs)
-
-    @staticmethod
-    def where(cond, a, b):
-        return np.where(cond, a, b)
-
-
-class _CasADiOps:
-    cos, sin, tan, atan, atan2, sqrt, fabs = (ca.cos, ca.sin, ca.tan, ca.atan, ca.atan2,
-                                              ca.sqrt, ca.fabs)
-
-    @staticmethod
-    def where(cond, a, b):
-        return ca.if_else(cond, a, b)
-
-
-def ops(*args):
-    """The math namespace for the arguments: CasADi if any of them is a CasADi object."""
-    return _CasADiOps if any(isinstance(a, _CASADI_TYPES) for a in args) else _NumPyOps
+from .backend import is_casadi, math_for
 
 
 def mu2(alpha, beta, sigma):
@@ -57,7 +34,7 @@ def mu2_terms(alpha, beta, sigma):
     proportional to mu2 or to 1 / mu2 can be written without a quotient through the points
     where mu2 is 0 or infinite (see transcription._local_crease_quaternions).
     """
-    op = ops(alpha, beta, sigma)
+    op = math_for(alpha, beta, sigma)
     h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
     return (op.where(sigma < 0, op.cos(h_minus), -op.sin(h_minus)),
             op.where(sigma < 0, op.cos(h_plus), op.sin(h_plus)))
@@ -81,7 +58,7 @@ def mv_multiplier(alpha, beta, sigma: np.ndarray):
     assignment. ``sigma`` is numeric (the signs are data, not design variables).
     """
     plus = (np.asarray(sigma, dtype=float) > 0).astype(float)
-    if ops(alpha, beta) is _CasADiOps:
+    if is_casadi(alpha, beta):
         plus = ca.reshape(ca.DM(plus), *alpha.shape)
     num, den = mu2_terms(alpha, beta, 2 * plus - 1)
     # num / den at sigma = +1, den / num at sigma = -1: both divisors stay positive
@@ -93,7 +70,7 @@ def fold_by_multiplier(omega, mu):
 
     Written with atan2 so omega = +-pi (folded flat) is exact: g = -sign(mu) omega there.
     """
-    op = ops(omega, mu)
+    op = math_for(omega, mu)
     half = omega / 2
     return 2 * op.atan2(-op.sin(half) * _sign(mu, op), op.fabs(mu) * op.cos(half))
 
@@ -121,7 +98,7 @@ def design_d(alpha_d, mu_abc):
     u = tan(alpha_d/2), v = tan(beta_d/2) and k = (mu - 1)/(mu + 1) gives v = k/u for
     sigma_d = -1 and v = -u/k for sigma_d = +1; v > 0 whenever |mu| != 1.
     """
-    op = ops(alpha_d, mu_abc)
+    op = math_for(alpha_d, mu_abc)
     outside = mu_abc * mu_abc > 1
     sigma_d = op.where(outside, -1.0, 1.0)
     u = op.tan(alpha_d / 2)
@@ -151,7 +128,7 @@ def panel_side_residuals(alpha_a, alpha_b, alpha_c, l_ab, l_ac, l_cd, l_bd):
 
 def _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac):
     """The denominator and the two numerators of eq:getSides: (s, s l_cd, s l_bd)."""
-    op = ops(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
+    op = math_for(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
     s = op.sin(alpha_a + alpha_b + alpha_c)
     return (s, -op.sin(alpha_b) * l_ab + op.sin(alpha_a + alpha_b) * l_ac,
             op.sin(alpha_a + alpha_c) * l_ab - op.sin(alpha_c) * l_ac)
