@@ -31,34 +31,35 @@ _CHECKS = ("first", "second", "final")
 
 # --------------------------------------------------------------------------- one vertex
 
-def mu2(sigma, alpha, beta):
-    """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed."""
-    return _mu2_cs(sigma, np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta))
+def mu2(alpha, beta, sigma):
+    """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed; the
+    arguments in :func:`rffqm_nlp.vertex.mu2`'s order."""
+    return _mu2_cs(np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta), sigma)
 
 
-def _mu2_cs(sigma, ca, sa, cb, sb):
+def _mu2_cs(ca, sa, cb, sb, sigma):
     """mu_2^sigma of eq:foldAngMult from the cosines and sines of alpha and beta."""
     return (-sigma + ca * cb + sa * sb) / (cb - sigma * ca)
 
 
-def mu1(sigma, alpha, beta):
+def mu1(alpha, beta, sigma):
     """mu_1^{-sigma}(alpha, beta) = mu_2^{-sigma}(alpha, pi - beta) (eq:foldAngMult).
 
-    ``sigma`` is the vertex sign; the result equals 1 / mu2(sigma, alpha, beta).
+    ``sigma`` is the vertex sign; the result equals 1 / mu2(alpha, beta, sigma).
     """
-    return mu2(-sigma, alpha, np.pi - beta)
+    return mu2(alpha, np.pi - beta, -sigma)
 
 
 def gamma2_bar(omega, alpha, beta, sigma):
     """gamma_2bar^sigma(omega; alpha, beta) of Theorem 2.1 in the form
     tan(gamma/2) = -tan(omega/2) / mu2 (PAPER_NOTES s.2), omega in [-pi, pi]."""
-    return _half_angle_map(omega, -1.0 / mu2(sigma, alpha, beta))
+    return _half_angle_map(omega, -1.0 / mu2(alpha, beta, sigma))
 
 
 def gamma1_bar(omega, alpha, beta, sigma):
     """gamma_1bar^{-sigma}(omega; alpha, beta) (eq:inverse), the inverse of
     :func:`gamma2_bar`: tan(gamma/2) = -tan(omega/2) / mu1."""
-    return _half_angle_map(omega, -1.0 / mu1(sigma, alpha, beta))
+    return _half_angle_map(omega, -1.0 / mu1(alpha, beta, sigma))
 
 
 def _half_angle_map(omega, k):
@@ -151,9 +152,9 @@ def _panel_step(a, b, c, l_ab, l_ac):
     alpha_a, alpha_b, alpha_c = a[_ALPHA], np.pi - b[_BETA], c[_BETA]
     A = alpha_a + alpha_b + alpha_c
     ok1 = (2 * np.pi - A > 0) & (2 * np.pi - A < np.pi)
-    mu = (_mu2_cs(-a[_SIGMA], a[_CA], a[_SA], -a[_CB], a[_SB])       # mu_1^{-sigma_a}
-          * _mu2_cs(b[_SIGMA], -b[_CB], b[_SB], -b[_CA], b[_SA])     # mu_2^{sigma_b}
-          * _mu2_cs(c[_SIGMA], c[_CB], c[_SB], c[_CA], c[_SA]))      # mu_2^{sigma_c}
+    mu = (_mu2_cs(a[_CA], a[_SA], -a[_CB], a[_SB], -a[_SIGMA])       # mu_1^{-sigma_a}
+          * _mu2_cs(-b[_CB], b[_SB], -b[_CA], b[_SA], b[_SIGMA])     # mu_2^{sigma_b}
+          * _mu2_cs(c[_CB], c[_SB], c[_CA], c[_SA], c[_SIGMA]))      # mu_2^{sigma_c}
     ok2 = np.isfinite(mu) & (np.abs(np.abs(mu) - 1) > SECOND_CHECK_TOL)
     sigma_d = -np.sign(mu**2 - 1)                                    # eq:marchingFinal
     cA = np.cos(A)
@@ -271,9 +272,9 @@ def _fold_tangent_factors(pat: Pattern) -> tuple[np.ndarray, np.ndarray]:
     """
     a, b, s = pat.alpha, pat.beta, pat.sigma
     k1_bottom = np.cumprod(np.concatenate([[1.0], -s[0, 1:]]))
-    k2 = (-k1_bottom / mu2(s[0], a[0], b[0])) * np.cumprod(
+    k2 = (-k1_bottom / mu2(a[0], b[0], s[0])) * np.cumprod(
         np.concatenate([np.ones((1, s.shape[1])), s[1:]]), axis=0)
-    k1 = -k2 / mu1(s, a, b)
+    k1 = -k2 / mu1(a, b, s)
     k1[0] = k1_bottom
     return k1, k2
 

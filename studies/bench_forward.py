@@ -46,7 +46,7 @@ sys.path.insert(0, str(ROOT))
 import rffqm_nlp as rq  # noqa: E402
 from rffqm_nlp import marching as mg  # noqa: E402
 from rffqm_nlp import numpy_model as nm  # noqa: E402
-from studies.forward_baseline import fold_loop, march_loop  # noqa: E402
+from tests.forward_oracle import fold_loop, march_loop  # noqa: E402
 
 AMPLITUDES = (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6)   # times pi
 OMEGA = 0.5

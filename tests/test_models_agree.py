@@ -13,8 +13,11 @@ from scipy.optimize import brentq
 import rffqm_nlp as rq
 from rffqm_nlp import marching as mg
 from rffqm_nlp import numpy_model as nm
+from rffqm_nlp import vertex as vx
 from rffqm_nlp.errors import InfeasibleDesign
 from rffqm_nlp.lengths import side_length_lp
+
+from helpers import admissible_vertex
 
 PI = np.pi
 RTOL = 1e-10
@@ -82,6 +85,21 @@ def assert_models_agree(bd, ws):
     assert_patterns_agree(p, q)
     assert_folds_agree(p, q, ws)
     return True
+
+
+# --------------------------------------------------------------------------- one vertex
+
+@SETTINGS
+@given(admissible_vertex(), omegas)
+def test_vertex_functions_take_the_same_arguments(v, omega):
+    """numpy_model's printed forms and vertex's half-angle forms, called the same way."""
+    a, b, s = v
+    for name in ("mu1", "mu2"):
+        assert getattr(nm, name)(a, b, s) == pytest.approx(getattr(vx, name)(a, b, s),
+                                                           rel=1e-9), name
+    for name in ("gamma1_bar", "gamma2_bar"):
+        assert getattr(nm, name)(omega, a, b, s) == pytest.approx(
+            getattr(vx, name)(omega, a, b, s), abs=1e-9), name
 
 
 # --------------------------------------------------------------------------- random patterns
@@ -173,8 +191,8 @@ def test_second_check_same_error(bracket):
 
     def excess(x):
         a, b, c = with_beta(x).left[0], base.left[1], base.bottom[0]
-        mu = (nm.mu1(a[2], a[0], a[1]) * nm.mu2(b[2], PI - b[1], PI - b[0])
-              * nm.mu2(c[2], c[1], c[0]))
+        mu = (nm.mu1(a[0], a[1], a[2]) * nm.mu2(PI - b[1], PI - b[0], b[2])
+              * nm.mu2(c[1], c[0], c[2]))
         return abs(mu) - 1
 
     bd = with_beta(brentq(excess, *bracket, xtol=1e-16, rtol=1e-15))

@@ -1,11 +1,9 @@
-"""Invariant tests of the plain-NumPy forward model (PAPER_NOTES s.7)."""
+"""Invariant tests of the plain-NumPy forward model (docs/paper.md s.7)."""
 
 from __future__ import annotations
 
 import itertools
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +15,7 @@ from rffqm_nlp.errors import InputError
 from rffqm_nlp.numpy_model import (_rotations_both_ways, fold, fold_angles, gamma1_bar,
                                    gamma2_bar, march, mu1, mu2)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from studies.forward_baseline import fold_loop, march_loop  # noqa: E402
+from forward_oracle import fold_loop, march_loop
 
 PI = np.pi
 SETTINGS = settings(max_examples=60, deadline=None)
@@ -99,7 +96,7 @@ def test_vertex_loop_is_identity(v, omega):
 def test_gamma1_bar_inverts_gamma2_bar(v, omega):
     a, b, s = v
     assert abs(gamma1_bar(gamma2_bar(omega, a, b, s), a, b, s) - omega) < 1e-12
-    assert abs(mu1(s, a, b) * mu2(s, a, b) - 1) < 1e-12
+    assert abs(mu1(a, b, s) * mu2(a, b, s) - 1) < 1e-12
 
 
 @SETTINGS
@@ -126,7 +123,7 @@ def test_sigma_is_minus_the_sign_of_log_abs_mu2(v):
     """|mu_2^{-1}| > 1 > |mu_2^{+1}| (|cos((a-b)/2)|, |sin((a-b)/2)| over the (a+b)/2 ones),
     the reason for sigma_d = -sign(mu_abc^2 - 1) in eq:marchingFinal."""
     a, b, s = v
-    assert s * (abs(mu2(s, a, b)) - 1) < 0
+    assert s * (abs(mu2(a, b, s)) - 1) < 0
 
 
 @SETTINGS
@@ -136,8 +133,8 @@ def test_marched_vertices_are_admissible(pat):
     a, b, s = pat.alpha, pat.beta, pat.sigma
     assert np.all((a > 0) & (a < PI) & (b > 0) & (b < PI))
     assert np.all(np.abs(np.cos(b) - s * np.cos(a)) > 1e-10)          # s in MV(a, b)
-    assert np.all(s * (np.abs(mu2(s, a, b)) - 1) < 0)
-    assert np.all(np.abs(pat.mu - mu2(s[1:, 1:], PI - a[1:, 1:], PI - b[1:, 1:])) < 1e-9 * (
+    assert np.all(s * (np.abs(mu2(a, b, s)) - 1) < 0)
+    assert np.all(np.abs(pat.mu - mu2(PI - a[1:, 1:], PI - b[1:, 1:], s[1:, 1:])) < 1e-9 * (
         1 + np.abs(pat.mu)))                                            # mu_abc = mu_2d
 
 
@@ -248,7 +245,7 @@ def test_flat_and_folded_flat_states(pat):
 # --------------------------------------------------------------------------- 6: Miura
 
 def schenk_guest(a, b, alpha0, theta):
-    """H, S, L, V of the Schenk & Guest (2013) unit cell (PAPER_NOTES s.6)."""
+    """H, S, L, V of the Schenk & Guest (2013) unit cell (docs/paper.md s.6)."""
     q = np.sqrt(1 + np.cos(theta) ** 2 * np.tan(alpha0) ** 2)
     return (a * np.sin(theta) * np.sin(alpha0), b * np.cos(theta) * np.tan(alpha0) / q,
             a * np.sqrt(1 - np.sin(theta) ** 2 * np.sin(alpha0) ** 2), b / q)
@@ -317,7 +314,7 @@ def test_second_check_fails_at_panel_1_2():
     bd = with_vertex(miura_boundary(3, 3, alpha0=1.1), (2, 1), alpha=0.6, beta=0.6)
     pat = march(bd)
     a, b, s = pat.alpha, pat.beta, pat.sigma
-    mu_ab = mu1(s[0, 1], a[0, 1], b[0, 1]) * mu2(s[1, 1], PI - b[1, 1], PI - a[1, 1])
+    mu_ab = mu1(a[0, 1], b[0, 1], s[0, 1]) * mu2(PI - b[1, 1], PI - a[1, 1], s[1, 1])
     alpha_c = b[0, 2]
     found = 0
     for target, s_c in itertools.product((1.0, -1.0), (1.0, -1.0)):
@@ -332,7 +329,7 @@ def test_second_check_fails_at_panel_1_2():
             if not 0.05 < x < PI - 0.05 or abs(x - alpha_c) < 0.05:
                 continue
             bad = with_vertex(bd, (1, 3), alpha=x, sigma=s_c)
-            assert abs(abs(mu_ab * mu2(s_c, alpha_c, x)) - 1) < 1e-13
+            assert abs(abs(mu_ab * mu2(alpha_c, x, s_c)) - 1) < 1e-13
             for f in (march, march_loop):
                 with pytest.raises(MarchingError) as err:
                     f(bad)
@@ -357,8 +354,8 @@ def first_nonpositive_length_panel(bd):
             aa, ab, ac = al[p, q], PI - be[p + 1, q], be[p, q + 1]
             A = aa + ab + ac
             assert 0 < 2 * PI - A < PI
-            m = (mu1(sg[p, q], aa, be[p, q]) * mu2(sg[p + 1, q], ab, PI - al[p + 1, q])
-                 * mu2(sg[p, q + 1], ac, al[p, q + 1]))
+            m = (mu1(aa, be[p, q], sg[p, q]) * mu2(ab, PI - al[p + 1, q], sg[p + 1, q])
+                 * mu2(ac, al[p, q + 1], sg[p, q + 1]))
             assert abs(abs(m) - 1) > 1e-12
             sd = -np.sign(m * m - 1)
             arg = sd * (2 * m - (m * m + 1) * np.cos(A)) / (2 * m * np.cos(A) - (m * m + 1))

@@ -1,9 +1,11 @@
-"""Baseline forward model: the paper's marching as a plain per-panel Python loop.
+"""The forward oracle: the paper's marching and folding as a plain per-panel Python loop.
 
 Scalar ``math`` for every angle and length, one 3x3 NumPy matrix per panel, panels in the
-paper's order (1,1), ..., (1,M), (2,1), ..., (N,M). Used only as the baseline of the
-benchmark against :mod:`rffqm_nlp.numpy_model`; the flat pattern follows the stable
-accumulated-direction construction of PAPER_NOTES s.4, not the printed recursion.
+paper's order (1,1), ..., (1,M), (2,1), ..., (N,M). The tests hold
+:mod:`rffqm_nlp.numpy_model` against it, and studies/bench_forward.py times it as the
+baseline; the flat pattern follows the stable accumulated-direction construction of
+docs/paper.md s.4, not the printed recursion. It trusts its inputs (boundary data of
+:class:`rffqm_nlp.BoundaryData`, omega in [-pi, pi]).
 """
 
 from __future__ import annotations
@@ -13,22 +15,22 @@ import math
 import numpy as np
 
 from rffqm_nlp.boundary import BoundaryData
-from rffqm_nlp.errors import InputError, MarchingError
+from rffqm_nlp.errors import MarchingError
 from rffqm_nlp.pattern import Pattern
 
 SECOND_CHECK_TOL = 1e-12
 TWO_PI = 2 * math.pi
 
 
-def _mu2(sigma: float, alpha: float, beta: float) -> float:
+def _mu2(alpha: float, beta: float, sigma: float) -> float:
     """mu_2^sigma(alpha, beta), eq:foldAngMult."""
     return (-sigma + math.cos(alpha) * math.cos(beta) + math.sin(alpha) * math.sin(beta)) / (
         math.cos(beta) - sigma * math.cos(alpha))
 
 
-def _mu1(sigma: float, alpha: float, beta: float) -> float:
+def _mu1(alpha: float, beta: float, sigma: float) -> float:
     """mu_1^{-sigma}(alpha, beta) = mu_2^{-sigma}(alpha, pi - beta), eq:foldAngMult."""
-    return _mu2(-sigma, alpha, math.pi - beta)
+    return _mu2(alpha, math.pi - beta, -sigma)
 
 
 def _unit(theta: float) -> np.ndarray:
@@ -57,14 +59,14 @@ def march_loop(bd: BoundaryData) -> Pattern:
     for p in range(N):
         theta_cd = 0.0            # direction of c->d of the panel to the left
         for q in range(M):
-            # eq:marchingSector, eq:marchingMV (role table, PAPER_NOTES s.1)
+            # eq:marchingSector, eq:marchingMV (role table, docs/paper.md s.1)
             aa, ba, sa = alpha[p][q], beta[p][q], sigma[p][q]
             ab, bb, sb = math.pi - beta[p + 1][q], math.pi - alpha[p + 1][q], sigma[p + 1][q]
             ac, bc, sc = beta[p][q + 1], alpha[p][q + 1], sigma[p][q + 1]
             A = aa + ab + ac
             if not 0 < TWO_PI - A < math.pi:
                 raise MarchingError("first", (p + 1, q + 1))
-            m = _mu1(sa, aa, ba) * _mu2(sb, ab, bb) * _mu2(sc, ac, bc)
+            m = _mu1(aa, ba, sa) * _mu2(ab, bb, sb) * _mu2(ac, bc, sc)
             if not abs(abs(m) - 1) > SECOND_CHECK_TOL:
                 raise MarchingError("second", (p + 1, q + 1))
             sd = -math.copysign(1.0, m * m - 1)
@@ -106,8 +108,6 @@ def _rot(t: np.ndarray, gamma: float) -> np.ndarray:
 
 def fold_loop(pattern: Pattern, omega: float) -> np.ndarray:
     """Folded positions (N+1, M+1, 3) by eq:foldInitial .. eq:finalCalc, panel by panel."""
-    if not (math.isfinite(omega) and abs(omega) <= math.pi):
-        raise InputError(f"omega must lie in [-pi, pi], got {omega!r}")
     N, M = pattern.N, pattern.M
     al, be, sg, X = pattern.alpha, pattern.beta, pattern.sigma, pattern.X
     g1 = [[0.0] * (M + 1) for _ in range(N + 1)]
@@ -119,10 +119,10 @@ def fold_loop(pattern: Pattern, omega: float) -> np.ndarray:
             a, b, s = float(al[p, q]), float(be[p, q]), float(sg[p, q])
             if p == 0:                                   # eq:foldInitial, eq:foldMiddle
                 g1[p][q] = omega if q == 0 else -s * g1[p][q - 1]
-                g2[p][q] = 2 * math.atan(-math.tan(g1[p][q] / 2) / _mu2(s, a, b))
+                g2[p][q] = 2 * math.atan(-math.tan(g1[p][q] / 2) / _mu2(a, b, s))
             else:                                        # eq:foldFinal
                 g2[p][q] = s * g2[p - 1][q]
-                g1[p][q] = 2 * math.atan(-math.tan(g2[p][q] / 2) / _mu1(s, a, b))
+                g1[p][q] = 2 * math.atan(-math.tan(g2[p][q] / 2) / _mu1(a, b, s))
             xa = X[p, q]
             t1 = (X[p, q + 1] - xa) / np.linalg.norm(X[p, q + 1] - xa)   # eq:tansLocal
             t2 = (X[p + 1, q] - xa) / np.linalg.norm(X[p + 1, q] - xa)
