@@ -1,32 +1,62 @@
-"""The paper's side-length linear program (eq:linearP), solved with SciPy's HiGHS.
+"""Side lengths for fixed sector angles: the paper's LP and a nonlinear replacement.
 
-Every side length of a marched pattern is linear in the boundary lengths
-ell = (l_ab^{11..N1}, l_ac^{11..1M}) once the angles are fixed (eq:getSides). The LP
-minimises sum(ell) subject to l_cd^{ij}, l_bd^{ij} >= eps and ell >= 0; the lengths used
-are ell* + delta (the paper's delta shift), with delta small enough that every side stays
-positive. This is the baseline the inverse design replaces with inline constraints.
+Once the sector angles are marched, every side of the pattern is linear in the boundary
+lengths ell = (l_ab^{11..N1}, l_ac^{11..1M}) (eq:getSides): :func:`length_maps` gives
+those linear maps. Two ways to choose ell over the same feasible set
+{l_cd^{ij}, l_bd^{ij} > 0, ell >= 0}:
+
+* :func:`side_length_lp`, the paper's linear program eq:linearP (SciPy's HiGHS): minimise
+  sum(ell) subject to every computed side >= eps, then shift ell by delta. Its objective
+  is arbitrary and drives some sides to nearly zero.
+* :func:`side_length_nlp` (CasADi + IPOPT), the nonlinear objective the paper leaves to
+  future work ("keep the aspect ratios of the panels as uniform as possible, while
+  optimizing over the same feasible set"). With s = A ell (K,) all K = (N+1)M + N(M+1)
+  sides, the scale fixed by mean(s) = 1 and s >= min_length:
+
+  - ``"max_min"``: maximise t subject to s >= t, an LP solved with IPOPT so both
+    objectives share one code path and one error model. Its optimum t* decides
+    feasibility: no pattern with every side >= min_length (times the mean) exists iff
+    t* < min_length, and no valid pattern at all iff t* <= 0.
+  - ``"uniform"``: minimise var(log s). It is scale-invariant and 0 exactly when all sides
+    are equal (a Miura-ori with a = b is recovered exactly); it penalises a side going to
+    zero without bound (a barrier against the LP's near-degenerate panels) and long sides
+    symmetrically; it controls the spread of sizes across the pattern, which a per-panel
+    aspect ratio does not; and equal sides give per-panel aspect ratios near 1 wherever the
+    angles allow it, without defining the aspect ratio of a general quadrilateral. The sides
+    are variables s >= min_length with s = A ell, so IPOPT never takes the log of a
+    non-positive number. Not convex in s: IPOPT returns a local minimiser, started at the
+    max-min solution.
+
+:func:`solve_side_length_nlp` is :func:`side_length_nlp` returning the whole
+:class:`SideLengthSolution`; :func:`length_spread` summarises a pattern's sides.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import casadi as ca
 import numpy as np
 from scipy.optimize import linprog
 
 from .boundary import BoundaryData
-from .errors import InfeasibleDesign, InputError, MarchingError
+from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
 
+#: The objectives of :func:`side_length_nlp`.
+OBJECTIVES: tuple[str, ...] = ("max_min", "uniform")
+#: Default lower bound of :func:`side_length_nlp` on every side, as a fraction of the mean.
+DEFAULT_MIN_LENGTH = 1e-3
 
+
+# --------------------------------------------------------------------------- linear maps
 @dataclass(frozen=True)
 class LengthMaps:
     """Linear maps from ell (N+M,) to every side: ``lh = Lh @ ell``, ``lv = Lv @ ell``.
 
-    ``Lh`` is (N+1, M, N+M), ``Lv`` is (N, M+1, N+M). ``interior`` (2NM, N+M) stacks the
-    rows of the sides that marching computes (l_cd, l_bd of every panel), the LP's
-    constraint matrix.
+    ``Lh`` is (N+1, M, N+M), ``Lv`` is (N, M+1, N+M).
     """
 
     Lh: np.ndarray
@@ -34,8 +64,17 @@ class LengthMaps:
 
     @property
     def interior(self) -> np.ndarray:
+        """(2NM, N+M): the rows of the sides marching computes (l_cd, l_bd of every panel),
+        the LP's constraint matrix."""
         n = self.Lh.shape[-1]
         return np.concatenate([self.Lv[:, 1:].reshape(-1, n), self.Lh[1:, :].reshape(-1, n)])
+
+    @property
+    def all_sides(self) -> np.ndarray:
+        """(K, N+M): the rows of every side, ``lh`` (N+1, M) row-major then ``lv`` (N, M+1)
+        row-major (the order of :attr:`Pattern.side_lengths`)."""
+        n = self.Lh.shape[-1]
+        return np.concatenate([self.Lh.reshape(-1, n), self.Lv.reshape(-1, n)])
 
 
 def length_maps(bd: BoundaryData) -> LengthMaps:
@@ -66,19 +105,19 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
     return LengthMaps(Lh=Lh, Lv=Lv)
 
 
+# --------------------------------------------------------------------------- the LP
 def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
                    delta: float | None = None) -> BoundaryData:
     """Boundary data with the angles of ``bd`` and side lengths from the LP (eq:linearP).
 
     ``eps`` is the lower bound on every computed side; the result is ell* + delta 1 with
-    ``delta`` (default: the largest of eps and half the admissible shift, whichever is
-    smaller) keeping every side positive. Raises :class:`InfeasibleDesign` when no positive
-    lengths exist for these angles, :class:`MarchingError` when the angles themselves fail.
+    ``delta`` (default: the smaller of eps and half the admissible shift) keeping every side
+    positive. Raises :class:`InfeasibleDesign` when no positive lengths exist for these
+    angles, :class:`MarchingError` when the angles themselves fail.
     """
     if not (np.isfinite(eps) and eps > 0):
         raise InputError(f"eps must be a finite positive length, got {eps!r}")
-    maps = length_maps(bd)
-    A = maps.interior
+    A = length_maps(bd).interior
     n = A.shape[1]
     res = linprog(np.ones(n), A_ub=-A, b_ub=-eps * np.ones(A.shape[0]), bounds=(0, None),
                   method="highs")
@@ -99,8 +138,177 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
     return bd.with_lengths(ell + delta)
 
 
+# --------------------------------------------------------------------------- the NLP
+@dataclass(frozen=True)
+class SideLengthSolution:
+    """A solved side-length NLP: the boundary data and what the solver reported.
+
+    ``sides`` (K,) are all edge lengths (rows of :attr:`LengthMaps.all_sides`), mean 1;
+    ``min_over_mean`` is the smallest of them; ``objective`` the optimal objective value
+    (t* for "max_min", var(log s) for "uniform"); ``stats`` IPOPT's status and counts.
+    """
+
+    boundary: BoundaryData
+    sides: np.ndarray
+    objective: float
+    min_over_mean: float
+    stats: dict
+
+
+def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
+                    min_length: float | None = None, *, tol: float = 1e-10,
+                    max_iter: int = 3000, verbose: bool = False) -> BoundaryData:
+    """Boundary data with the angles of ``bd`` and optimised side lengths (mean side 1).
+
+    ``objective`` is one of :data:`OBJECTIVES` (see the module docstring). ``min_length``
+    (default :data:`DEFAULT_MIN_LENGTH`) is the lower bound on every side as a fraction of
+    the mean side, in (0, 1). Raises :class:`InfeasibleDesign` when no lengths give every
+    side >= min_length * mean (in particular when no valid pattern exists for these
+    angles), :class:`SolverFailed` with IPOPT's status when IPOPT does not succeed,
+    :class:`MarchingError` when the angles themselves fail the marching checks and
+    :class:`InputError` on invalid arguments.
+    """
+    return solve_side_length_nlp(bd, objective, min_length, tol=tol, max_iter=max_iter,
+                                 verbose=verbose).boundary
+
+
+def solve_side_length_nlp(bd: BoundaryData, objective: str = "max_min",
+                          min_length: float | None = None, *, tol: float = 1e-10,
+                          max_iter: int = 3000, verbose: bool = False) -> SideLengthSolution:
+    """:func:`side_length_nlp` returning the whole :class:`SideLengthSolution`."""
+    min_length = _check_nlp_arguments(bd, objective, min_length, tol, max_iter)
+    A = length_maps(bd).all_sides
+    mean_row = A.mean(axis=0)
+    if not np.any(np.abs(mean_row) > 0):
+        raise InfeasibleDesign("the mean side length is identically zero for these angles")
+    opts = _ipopt_options(tol, int(max_iter), verbose)
+    ell, t_star, stats = _max_min(A, mean_row, opts)
+    _check_feasible(t_star, min_length)
+    value = t_star
+    if objective == "uniform":
+        s0 = np.maximum(A @ ell, min_length)
+        ell, value, stats = _uniform(A, mean_row, min_length, ell, s0, opts)
+    floor = (min_length if objective == "uniform" else t_star) * (1 - 1e-6)
+    return _solution(bd, A, ell, float(value), floor, stats)
+
+
+def _check_nlp_arguments(bd: Any, objective: Any, min_length: Any, tol: Any,
+                         max_iter: Any) -> float:
+    """Raise :class:`InputError` on an invalid argument; the min_length to use."""
+    if not isinstance(bd, BoundaryData):
+        raise InputError(f"side_length_nlp expects BoundaryData, got {type(bd).__name__}")
+    if objective not in OBJECTIVES:
+        raise InputError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+    if min_length is None:
+        min_length = DEFAULT_MIN_LENGTH
+    if not (_is_number(min_length) and np.isfinite(min_length) and 0 < min_length < 1):
+        raise InputError(
+            f"min_length is a fraction of the mean side and must be a number in (0, 1), got "
+            f"{min_length!r} (1 would force all sides equal)")
+    if not (_is_number(tol) and np.isfinite(tol) and tol > 0):
+        raise InputError(f"tol must be a finite positive number, got {tol!r}")
+    if not (_is_number(max_iter) and np.isfinite(max_iter) and max_iter >= 1
+            and int(max_iter) == max_iter):
+        raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
+    return float(min_length)
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+
+
+def _check_feasible(t_star: float, min_length: float) -> None:
+    """Raise :class:`InfeasibleDesign` unless the max-min optimum t* reaches min_length."""
+    if t_star <= 0:
+        raise InfeasibleDesign(
+            f"no positive side lengths exist for these sector angles: the largest achievable "
+            f"smallest side is {t_star:.3g} times the mean side (the LP of eq:linearP is "
+            "infeasible); change the boundary angles")
+    if t_star < min_length:
+        raise InfeasibleDesign(
+            f"every side >= min_length = {min_length:g} times the mean side is impossible for "
+            f"these sector angles: the best achievable is {t_star:.3g}; lower min_length or "
+            "change the boundary angles")
+
+
+def _solution(bd: BoundaryData, A: np.ndarray, ell: np.ndarray, value: float, floor: float,
+              stats: dict) -> SideLengthSolution:
+    """The solution scaled to mean side 1; :class:`SolverFailed` if a side is below ``floor``
+    or the lengths are not admissible boundary lengths."""
+    sides = A @ ell
+    scale = sides.mean()
+    ell, sides = ell / scale, sides / scale
+    try:
+        boundary = bd.with_lengths(ell)
+    except InputError as exc:
+        raise SolverFailed(f"IPOPT's lengths are not admissible boundary lengths: {exc}",
+                           status="invalid_lengths", stats=stats, last_iterate=ell) from exc
+    if sides.min() < floor:
+        raise SolverFailed(
+            f"the solution violates its bound: smallest side {sides.min():.3g} of the mean, "
+            f"bound {floor:.3g}", status="bound_violated", stats=stats, last_iterate=ell)
+    return SideLengthSolution(boundary=boundary, sides=sides, objective=value,
+                              min_over_mean=float(sides.min()), stats=stats)
+
+
+def _ipopt_options(tol: float, max_iter: int, verbose: bool) -> dict[str, Any]:
+    return {"ipopt.tol": float(tol), "ipopt.constr_viol_tol": 1e-10,
+            "ipopt.max_iter": max_iter, "ipopt.print_level": 5 if verbose else 0,
+            "print_time": verbose, "ipopt.sb": "yes"}
+
+
+def _solve(name: str, x, f, g, opts: dict, x0, lbx, ubx, lbg,
+           ubg) -> tuple[np.ndarray, float, dict]:
+    """IPOPT on min f(x) s.t. lbg <= g(x) <= ubg, lbx <= x <= ubx: (x*, f*, stats)."""
+    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": g}, opts)
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    st = solver.stats()
+    xs = np.asarray(sol["x"].full()).ravel()
+    stats = {"status": st["return_status"], "success": bool(st["success"]),
+             "iterations": int(st["iter_count"]), "objective": float(sol["f"])}
+    if not st["success"]:
+        raise_for_ipopt(st["return_status"], stats["iterations"],
+                        f"the {name} side-length problem",
+                        "lower min_length or change the boundary angles",
+                        "raise max_iter or relax tol", stats, xs)
+    return xs, float(sol["f"]), stats
+
+
+def _max_min(A: np.ndarray, mean_row: np.ndarray, opts: dict):
+    """max t s.t. A ell >= t, mean_row . ell = 1 (variables ell, t, both free)."""
+    K, n = A.shape
+    x = ca.MX.sym("x", n + 1)
+    ell, t = x[:n], x[n]
+    g = ca.vertcat(ca.mtimes(ca.DM(A), ell) - t, ca.dot(ca.DM(mean_row), ell))
+    # Start: equal boundary lengths scaled to mean side 1 (any point is fine for an LP).
+    ell0 = np.ones(n) / mean_row.sum() if mean_row.sum() > 0 else np.ones(n)
+    x0 = np.append(ell0, (A @ ell0).min())
+    xs, f, stats = _solve("max_min", x, -t, g, opts, x0, -np.inf, np.inf,
+                          np.append(np.zeros(K), 1.0), np.append(np.full(K, np.inf), 1.0))
+    return xs[:n], -f, stats
+
+
+def _uniform(A: np.ndarray, mean_row: np.ndarray, min_length: float, ell0: np.ndarray,
+             s0: np.ndarray, opts: dict):
+    """min var(log s) s.t. s = A ell, mean(s) = 1, s >= min_length (variables ell, s)."""
+    K, n = A.shape
+    x = ca.MX.sym("x", n + K + 1)
+    ell, s, m = x[:n], x[n:n + K], x[n + K]
+    # var(log s) = min over m of mean((log s - m)^2); the free variable m keeps the Hessian
+    # sparse (the closed form with mean(log s)^2 couples every pair of sides).
+    f = ca.sumsqr(ca.log(s) - m) / K
+    g = ca.vertcat(ca.mtimes(ca.DM(A), ell) - s, ca.sum1(s) / K)
+    lbx = np.concatenate([np.full(n, -np.inf), np.full(K, min_length), [-np.inf]])
+    x0 = np.concatenate([ell0, s0, [np.log(s0).mean()]])
+    xs, f_val, stats = _solve("uniform", x, f, g, opts, x0, lbx, np.inf,
+                              np.append(np.zeros(K), 1.0), np.append(np.zeros(K), 1.0))
+    return xs[:n], f_val, stats
+
+
+# --------------------------------------------------------------------------- summary
 def length_spread(lh: np.ndarray, lv: np.ndarray) -> dict[str, float]:
-    """Summary of a pattern's side lengths: smallest/mean, largest/mean, max/min."""
+    """Summary of a pattern's side lengths lh (N+1, M) and lv (N, M+1): smallest/mean,
+    largest/mean, max/min."""
     sides = np.concatenate([np.ravel(lh), np.ravel(lv)])
     mean = sides.mean()
     return {"min_over_mean": float(sides.min() / mean), "max_over_mean": float(sides.max() / mean),

@@ -34,9 +34,8 @@ import numpy as np  # noqa: E402
 
 import rffqm_nlp as rq  # noqa: E402
 from rffqm_nlp.errors import InfeasibleDesign, MarchingError  # noqa: E402
-from rffqm_nlp.lengths import length_spread, side_length_lp  # noqa: E402
+from rffqm_nlp.lengths import length_spread, side_length_lp, side_length_nlp  # noqa: E402
 from rffqm_nlp.marching import march  # noqa: E402
-from rffqm_nlp.side_lengths import side_length_nlp  # noqa: E402
 from rffqm_nlp.viz import plot_crease_pattern  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,4 +1,5 @@
-"""Side lengths by IPOPT over the LP's feasible set (rffqm_nlp.side_lengths, Fig. Random)."""
+"""Side lengths for fixed angles (rffqm_nlp.lengths): the LP eq:linearP and the NLP by IPOPT
+over the same feasible set, on the paper's Fig. Random inputs."""
 
 import numpy as np
 import pytest
@@ -6,9 +7,9 @@ from scipy.optimize import linprog
 
 import rffqm_nlp as rq
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
-from rffqm_nlp.lengths import length_spread, side_length_lp
+from rffqm_nlp.lengths import (length_maps, length_spread, side_length_lp, side_length_nlp,
+                               solve_side_length_nlp)
 from rffqm_nlp.marching import march, pattern_function
-from rffqm_nlp.side_lengths import side_length_nlp, solve_side_lengths
 
 SEEDS = (0, 1, 2)
 OBJECTIVES = ("max_min", "uniform")
@@ -52,6 +53,45 @@ def log_variance(sides):
     return float(np.var(np.log(sides)))
 
 
+# --------------------------------------------------------------------------- linear maps, LP
+@pytest.mark.parametrize("seed", SEEDS)
+def test_length_maps_are_the_marched_sides_of_unit_lengths(seed):
+    bd = fig_random(seed, n=6)
+    maps = length_maps(bd)
+    A = sides_matrix_by_marching(bd)
+    np.testing.assert_allclose(maps.all_sides, A, rtol=1e-10, atol=1e-10)
+    assert maps.interior.shape == (2 * 6 * 6, 12)
+    pat = march(side_length_lp(bd))
+    np.testing.assert_allclose(maps.all_sides @ pat.boundary.lengths, pat.side_lengths,
+                               rtol=1e-9)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_lp_is_eq_linearP_shifted_by_delta(seed):
+    """sum(ell) is HiGHS's optimum of min sum(ell), interior sides >= eps, ell >= 0, computed
+    here on the marched matrix; the result is that optimum plus delta."""
+    bd, eps, delta = fig_random(seed), 1e-2, 1e-7
+    ell = side_length_lp(bd, eps=eps, delta=delta).lengths - delta
+    N = bd.N
+    A = sides_matrix_by_marching(bd)
+    lh_rows = np.arange((N + 1) * bd.M).reshape(N + 1, bd.M)[1:].ravel()
+    lv_rows = (N + 1) * bd.M + np.arange(N * (bd.M + 1)).reshape(N, bd.M + 1)[:, 1:].ravel()
+    interior = A[np.concatenate([lh_rows, lv_rows])]
+    res = linprog(np.ones(A.shape[1]), A_ub=-interior, b_ub=-eps * np.ones(len(interior)),
+                  bounds=(0, None), method="highs")
+    assert ell.sum() == pytest.approx(res.fun, rel=1e-8)
+    assert (interior @ ell).min() >= eps * (1 - 1e-8)
+    assert march(side_length_lp(bd)).side_lengths.min() > 0
+
+
+@pytest.mark.parametrize("kwargs", [{"eps": 0.0}, {"eps": -1.0}, {"eps": float("nan")},
+                                    {"delta": 0.0}, {"delta": -1.0}, {"delta": float("nan")}])
+def test_lp_invalid_arguments(kwargs):
+    with pytest.raises(InputError, match=next(iter(kwargs))):
+        side_length_lp(fig_random(0, n=4), **kwargs)
+
+
+# --------------------------------------------------------------------------- NLP
 @pytest.fixture(scope="module")
 def solved():
     """{seed: {"lp" | "max_min" | "uniform": Pattern}} on the Fig. Random inputs."""
@@ -105,7 +145,7 @@ def test_uniform_lowers_log_variance(solved, seed):
 def test_max_min_certified_by_linprog(solved, seed):
     bd = solved[seed]["bd"]
     t_lp = linprog_max_min(sides_matrix_by_marching(bd))
-    sol = solve_side_lengths(bd, "max_min")
+    sol = solve_side_length_nlp(bd, "max_min")
     assert sol.objective == pytest.approx(t_lp, abs=1e-6)
     sides = solved[seed]["max_min"].side_lengths
     assert sides.min() / sides.mean() == pytest.approx(t_lp, abs=1e-6)
@@ -124,7 +164,7 @@ def test_uniform_on_miura_gives_equal_sides(layout, a, b):
 
 
 def test_max_min_on_miura_is_one():
-    sol = solve_side_lengths(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
+    sol = solve_side_length_nlp(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
     assert sol.objective == pytest.approx(1.0, abs=1e-8)
 
 
