@@ -2,7 +2,7 @@
 
 Vertex (i, j) is 1-based as in the paper; every vertex carries its a-role triple
 (alpha, beta, sigma): alpha is the sector angle of its upper-right panel, beta that of its
-upper-left panel, sigma its mountain-valley sign (PAPER_NOTES s.1).
+upper-left panel, sigma its mountain-valley sign (docs/paper.md s.1).
 
 Boundary data:
 
@@ -161,7 +161,7 @@ def _check_vertex(vertex: tuple[int, int], a: float, b: float, s: float) -> None
 
 
 def miura_vertex(i: int, j: int, alpha0: float, layout: Layout) -> tuple[float, float, float]:
-    """(alpha, beta, sigma) of vertex (i, j) (1-based) of a Miura-ori (PAPER_NOTES s.6)."""
+    """(alpha, beta, sigma) of vertex (i, j) (1-based) of a Miura-ori (docs/paper.md s.6)."""
     if layout == "zigzag_j":
         ang = alpha0 if j % 2 == 1 else np.pi - alpha0
         return ang, ang, -1.0

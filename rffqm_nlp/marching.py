@@ -34,7 +34,7 @@ def panel_cell() -> ca.Function:
     Inputs ``x = (alpha, beta, sigma) of b, l_ab`` (the accumulator along a row) and
     ``u = (alpha, beta, sigma) of a, (alpha, beta, sigma) of c, l_ac``; outputs
     ``x_next = (alpha, beta, sigma) of d, l_cd`` and ``y = (l_bd, mu_abc, alpha_d)``.
-    Roles follow PAPER_NOTES s.1 (eq:marchingSector, eq:marchingMV, eq:marchingSides).
+    Roles follow docs/paper.md s.1 (eq:marchingSector, eq:marchingMV, eq:marchingSides).
     """
     x = ca.SX.sym("x", 4)
     u = ca.SX.sym("u", 7)
@@ -100,7 +100,7 @@ def pattern_function(N: int, M: int) -> ca.Function:
 def edge_directions(alpha, beta):
     """Directions of the horizontal edges (N+1 x M+1; the last column is auxiliary).
 
-    Accumulated sector angles (PAPER_NOTES s.4): along the left column the direction turns by
+    Accumulated sector angles (docs/paper.md s.4): along the left column the direction turns by
     alpha(i, 1) - beta(i+1, 1), along a row by pi - alpha - beta of each vertex.
     """
     first_col = ca.vertcat(0, ca.cumsum(alpha[:-1, 0] - beta[1:, 0], 0))
@@ -110,7 +110,7 @@ def edge_directions(alpha, beta):
 
 
 def _flat_positions(alpha, beta, lh, lv):
-    """Flat vertex positions as cumulative sums of edge vectors (stable, PAPER_NOTES s.4)."""
+    """Flat vertex positions as cumulative sums of edge vectors (stable, docs/paper.md s.4)."""
     theta_h = edge_directions(alpha, beta)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
     bottom_x = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.cos(theta_h[0, :-1]), 1))
@@ -350,9 +350,8 @@ def evaluate(f: ca.Function, args: list) -> list[np.ndarray]:
 class _Evaluation:
     """A CasADi Function evaluated on NumPy arrays in place, through its buffer.
 
-    This skips the DM conversions of ``Function.call`` (about half the time of a large
-    march or fold, measured in studies/bench_forward.py's profiling) and lets one input be
-    changed between runs.
+    This skips the DM conversions of ``Function.call``, a large share of the time of a large
+    march or fold, and lets one input be changed between runs.
     """
 
     def __init__(self, f: ca.Function, args: list):

@@ -1,15 +1,15 @@
 """Plain-NumPy forward model of RFFQM: marching and folding, written from the paper.
 
-This is the independent yardstick for the CasADi model. Conventions (PAPER_NOTES s.1):
+This is the independent yardstick for the CasADi model. Conventions (docs/paper.md s.1):
 vertex (i, j) (1-based) is stored at ``[i-1, j-1]`` and carries its a-role triple
 (alpha, beta, sigma); panel (i, j) has corners a = (i, j), b = (i+1, j), c = (i, j+1),
 d = (i+1, j+1).
 
 * :func:`march` is the crease-pattern marching of eq:marchingSector .. eq:finalCheck, one
   vectorised step per anti-diagonal of panels; flat positions are cumulative sums of
-  edge vectors whose directions are accumulated sector angles (PAPER_NOTES s.4).
+  edge vectors whose directions are accumulated sector angles (docs/paper.md s.4).
 * :func:`fold` is the kinematics of eq:creaseInputs .. eq:finalCalc. Every fold angle has
-  tan(gamma/2) = k tan(omega/2) with a constant k per crease (PAPER_NOTES s.2), so its
+  tan(gamma/2) = k tan(omega/2) with a constant k per crease (docs/paper.md s.2), so its
   cosine and sine are rational in (cos(omega/2), sin(omega/2)); the deformation gradients
   (eq:defGrads) are cumulative products of crease rotations (eq:localRots), one batched
   matrix product per row, and deformed positions are cumulative sums of rotated edges.
@@ -52,7 +52,7 @@ def mu1(alpha, beta, sigma):
 
 def gamma2_bar(omega, alpha, beta, sigma):
     """gamma_2bar^sigma(omega; alpha, beta) of Theorem 2.1 in the form
-    tan(gamma/2) = -tan(omega/2) / mu2 (PAPER_NOTES s.2), omega in [-pi, pi]."""
+    tan(gamma/2) = -tan(omega/2) / mu2 (docs/paper.md s.2), omega in [-pi, pi]."""
     return _half_angle_map(omega, -1.0 / mu2(alpha, beta, sigma))
 
 
@@ -147,7 +147,7 @@ def _panel_step(a, b, c, l_ab, l_ac):
     known sides. Returns the table of corner d, l_cd, l_bd, mu_abc, the angle sum
     A = alpha_a + alpha_b + alpha_c and a failure code (0 ok, 1/2/3 first/second/final).
     """
-    # panel angles from the role table (PAPER_NOTES s.1):
+    # panel angles from the role table (docs/paper.md s.1):
     # (alpha_b, beta_b) = (pi - beta, pi - alpha) of b, (alpha_c, beta_c) = (beta, alpha) of c
     alpha_a, alpha_b, alpha_c = a[_ALPHA], np.pi - b[_BETA], c[_BETA]
     A = alpha_a + alpha_b + alpha_c
@@ -182,7 +182,7 @@ def _raise_first_failure(code, mu, asum, lv, lh):
 
 
 def _edge_directions(alpha, beta):
-    """Polar angles of all flat edges from accumulated sector angles (PAPER_NOTES s.4).
+    """Polar angles of all flat edges from accumulated sector angles (docs/paper.md s.4).
 
     Returns phi_h (N+1, M) of the edges (i, j) -> (i, j+1) and phi_v (N, M+1) of the
     edges (i, j) -> (i+1, j). The first edge points along +e1; along the bottom row the

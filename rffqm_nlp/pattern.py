@@ -40,7 +40,7 @@ class Pattern:
 
     Vertex (i, j) (1-based) is stored at ``[i-1, j-1]``.
 
-    * ``alpha, beta, sigma`` (N+1, M+1): a-role triple of every vertex (PAPER_NOTES s.1);
+    * ``alpha, beta, sigma`` (N+1, M+1): a-role triple of every vertex (docs/paper.md s.1);
     * ``lh`` (N+1, M): length of the horizontal edge (i, j) -> (i, j+1), i.e. l_ac of panel
       (i, j) and l_bd of panel (i-1, j);
     * ``lv`` (N, M+1): length of the vertical edge (i, j) -> (i+1, j), i.e. l_ab of panel

@@ -7,7 +7,7 @@ from hypothesis import assume, strategies as st
 
 
 def rot_about(t: np.ndarray, gamma: float) -> np.ndarray:
-    """R_t(gamma) of eq:localRots for an in-plane unit tangent t (PAPER_NOTES s.3)."""
+    """R_t(gamma) of eq:localRots for an in-plane unit tangent t (docs/paper.md s.3)."""
     t = np.asarray(t, dtype=float)
     e3 = np.array([0.0, 0.0, 1.0])
     tp = np.array([-t[1], t[0], 0.0])

@@ -1,4 +1,4 @@
-"""The CasADi marching graph: invariants of PAPER_NOTES s.7, closed forms, errors, gradients."""
+"""The CasADi marching graph: invariants of docs/paper.md s.7, closed forms, errors, gradients."""
 
 import casadi as ca
 import numpy as np

@@ -123,7 +123,7 @@ def test_edge_and_second_differences_values():
 
 
 def test_edge_vectors_see_parity_offsets_that_central_forms_miss():
-    """PAPER_NOTES s.8: shifting one parity class sideways barely changes the central
+    """docs/paper.md s.8: shifting one parity class sideways barely changes the central
     forms, while the neighbour distances change at first order."""
     P = S.get("plane").lattice(8, 8)
     Q = P.copy()
