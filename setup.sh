@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Sets up rffqm-nlp on a fresh Debian machine with Python 3.11: system libraries for
-# off-screen rendering (when run as root with apt-get), then a virtual environment in .venv
-# with the package and its extras. Safe to run again.
+# off-screen rendering (EGL and OSMesa, when run as root with apt-get; the tests need them),
+# then a virtual environment in .venv with the package and its test extra (which holds the
+# viz and sweep extras). Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")"
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = "0" ]; then
-    if ! dpkg -s libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 >/dev/null 2>&1; then
+    if ! dpkg -s libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 >/dev/null 2>&1; then
         apt-get update -qq
         DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
             libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 >/dev/null
@@ -14,4 +15,4 @@ fi
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-.venv/bin/python -m pip install -q -e ".[viz,dev,sweep]"
+.venv/bin/python -m pip install -q -e ".[test]"
