@@ -6,8 +6,9 @@ After Feng, Dang, James & Plucinsky, J. Mech. Phys. Solids (2020), doi 10.1016/j
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 
-__version__ = "0.1.0"  # set before the imports below, which read it (io)
+__version__ = importlib.metadata.version("rffqm_nlp")  # before the imports (foldfile reads it)
 
 from .boundary import BoundaryData, miura_boundary, perturb_angles
 from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
@@ -18,7 +19,8 @@ from .design import DesignProblem
 from .results import DesignResult
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
-               "shape", "design", "transcription", "results", "io", "viz", "cli", "sweeps")
+               "shape", "design", "transcription", "results", "files", "foldfile", "export",
+               "viz", "cli", "sweeps")
 
 
 def __getattr__(name: str):

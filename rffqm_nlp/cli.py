@@ -8,9 +8,10 @@ a perturbed Miura-ori).
 
 Every user error (missing or bad file, unknown target, a failed marching check, an
 infeasible design, a solver failure) ends with a one-line red reason and exit status 2,
-never a traceback. Files are written atomically; a command that writes several files
-writes them into a hidden temporary sibling folder first and moves them into place only
-when all of them succeeded, so a failure leaves nothing behind.
+never a traceback. Files are written atomically; ``design`` and ``march`` write their
+folder into a staging folder next to it and replace the output folder whole only when every
+file succeeded (:func:`rffqm_nlp.files.replace_folder`), so a failure or a kill leaves the
+complete old folder or the complete new one.
 """
 
 from __future__ import annotations
@@ -18,10 +19,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import re
-import shutil
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Optional
@@ -34,8 +32,10 @@ from rich.table import Table
 from typer.core import TyperCommand
 
 from .boundary import LAYOUTS, miura_boundary, perturb_angles
-from .errors import InputError, RffqmError
-from .io import DIR_MODE, FILE_MODE, atomic_path
+from .errors import InputError, RffqmError, one_line
+from .export import EXPORTERS
+from .files import check_out_dir, jsonable, replace_folder, write_json
+from .pattern import check_omega
 
 if TYPE_CHECKING:
     from .design import DesignProblem
@@ -49,10 +49,8 @@ console = Console(stderr=True)
 FRAMES = 24
 #: Resolution (per direction) of the target mesh drawn in render.png.
 TARGET_MESH = 60
-#: File names, by export format.
-EXPORT_NAMES = {"fold": "pattern.fold", "svg": "crease.svg", "pdf": "crease.pdf",
-                "dxf": "crease.dxf", "obj": "folded.obj", "ply": "folded.ply",
-                "glb": "folded.glb"}
+#: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
+DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
 
 
 def _version(value: bool) -> None:
@@ -76,7 +74,7 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except (RffqmError, OSError) as exc:
-        console.print(f"[bold red]error:[/] {escape(_one_line(exc))}", highlight=False,
+        console.print(f"[bold red]error:[/] {escape(one_line(exc))}", highlight=False,
                       soft_wrap=True)
         raise typer.Exit(2) from None
     except KeyboardInterrupt:
@@ -84,69 +82,9 @@ def user_errors() -> Iterator[None]:
         raise typer.Exit(130) from None
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    if isinstance(exc, OSError) and not text:
-        text = type(exc).__name__
-    return text
-
-
 def warn(message: str) -> None:
     """A yellow one-line warning on stderr."""
     console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
-
-
-def check_out_dir(out: Path, force: bool) -> None:
-    """Refuse an output folder that is a file, or not empty without ``force``, or cannot be
-    created; touches nothing (run it before a long computation)."""
-    if out.exists():
-        if not out.is_dir():
-            raise InputError(f"{out} exists and is not a folder; choose another --out")
-        if any(out.iterdir()) and not force:
-            raise InputError(f"{out} exists and is not empty; pass --force to overwrite "
-                             "(files of the same name are replaced, others are kept)")
-    existing = out.absolute()
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise InputError(f"cannot create {out}: {existing} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise InputError(f"cannot write into {existing} (permission denied)")
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, then rename it into place."""
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-
-
-@contextmanager
-def staged_dir(out: Path) -> Iterator[Path]:
-    """Yield a temporary sibling folder of ``out``; on success move its files into ``out``.
-
-    A new ``out`` is the renamed temporary folder; into an existing one every file is moved
-    with :func:`os.replace` (same-named files replaced, other files kept). On an exception
-    the temporary folder is removed and ``out`` is left as it was.
-    """
-    out = Path(os.path.abspath(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".partial"))
-    try:
-        yield tmp
-        for path in tmp.rglob("*"):
-            os.chmod(path, DIR_MODE if path.is_dir() else FILE_MODE)
-        os.chmod(tmp, DIR_MODE)
-        if not out.exists():
-            os.rename(tmp, out)
-            return
-        if not out.is_dir():
-            raise InputError(f"{out} exists and is not a folder")
-        for path in sorted(tmp.iterdir()):
-            os.replace(path, out / path.name)
-        tmp.rmdir()
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def _parse_panels(text: str) -> tuple[int, int]:
@@ -217,7 +155,7 @@ def _target_for_render(result: "DesignResult", target=None):
         try:
             target = surfaces.from_config(result.problem["target"])
         except (RffqmError, KeyError, TypeError) as exc:
-            warn(f"cannot rebuild the target surface ({_one_line(exc)}); drawing the target "
+            warn(f"cannot rebuild the target surface ({one_line(exc)}); drawing the target "
                  "lattice points instead")
             return _pattern_frame(result.target_points.reshape(-1, 3), result)
     mesh = target.mesh(TARGET_MESH, TARGET_MESH)
@@ -225,14 +163,11 @@ def _target_for_render(result: "DesignResult", target=None):
                            process=False)
 
 
-def _fold_metadata(result: "DesignResult") -> dict:
-    return {"target": result.problem.get("target", {}), "fit": result.fit}
-
-
-def _write_fold(path: Path, result: "DesignResult", omega: float) -> None:
-    from . import io
-
-    io.write_fold(path, result.pattern, omega, frames=FRAMES, metadata=_fold_metadata(result))
+def _export_options(result: "DesignResult") -> dict:
+    """The options every exporter is offered (FOLD takes them: its folding states and the
+    target and fit as metadata)."""
+    return {"frames": FRAMES,
+            "metadata": {"target": result.problem.get("target", {}), "fit": result.fit}}
 
 
 def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames: int,
@@ -242,12 +177,6 @@ def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames
     viz.render_png(folder / "render.png", result.pattern, result.omega,
                    target=_target_for_render(result, target))
     viz.folding_gif(folder / "folding.gif", result.pattern, omega_end, frames=frames)
-
-
-def _check_omega(omega: float) -> float:
-    if not (math.isfinite(omega) and abs(omega) <= math.pi):
-        raise InputError(f"--omega must lie in [-pi, pi], got {omega:g}")
-    return float(omega)
 
 
 def _check_frames(frames: int) -> None:
@@ -261,10 +190,11 @@ def design(
     target: Path = typer.Argument(..., help="Design file (TOML) with [target] and [design] "
                                   "tables, e.g. targets/sphere_cap.toml.", show_default=False),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder (must be new or empty "
-                             "unless --force).", show_default=False),
+                             "unless --force, which replaces it whole).", show_default=False),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No live progress display."),
-    force: bool = typer.Option(False, "--force", help="Write into a non-empty output folder "
-                               "(same-named files are replaced)."),
+    force: bool = typer.Option(False, "--force", help="Replace a non-empty output folder "
+                               "(the whole folder: files not written by this run are "
+                               "removed)."),
     max_iter: Optional[int] = typer.Option(None, "--max-iter", min=1, help="Iteration limit "
                                            "(overrides the file's max_iter)."),
     panels: Optional[str] = typer.Option(None, "--panels", metavar="2N 2M",
@@ -295,7 +225,7 @@ def design(
             problem = dataclasses.replace(problem, **changes)
         check_out_dir(out, force)          # before the solve: never waste a long solve
         result = _solve(problem, quiet)
-        with staged_dir(out) as tmp:
+        with replace_folder(out) as tmp:
             _write_design(tmp, result, problem)
     Console().print(_summary(result, out))
 
@@ -346,16 +276,13 @@ def _solve_logged(problem: "DesignProblem", every: float = 10.0) -> "DesignResul
 
 def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem") -> None:
     """Every output file of ``design`` into ``folder``."""
-    from . import io, viz
+    from . import viz
 
     pat, omega = result.pattern, result.omega
     result.save(folder)
-    _write_fold(folder / "pattern.fold", result, omega)
-    io.write_svg(folder / "crease.svg", pat, omega)
-    io.write_pdf(folder / "crease.pdf", pat, omega)
-    io.write_dxf(folder / "crease.dxf", pat, omega)
-    io.write_mesh(folder / "folded.obj", pat, omega)
-    io.write_mesh(folder / "folded.glb", pat, omega)
+    options = _export_options(result)
+    for fmt in DESIGN_FORMATS:
+        EXPORTERS[fmt].write(folder / EXPORTERS[fmt].filename, pat, omega, **options)
     viz.plot_convergence(result.stats["history"], folder / "convergence.png")
     ok, reason = viz.rendering_available()
     if ok:
@@ -466,17 +393,16 @@ def fold_cmd(
                 raise InputError(f"--frames must be at least 1, got {frames}")
             om = np.linspace(0.0, result.omega, frames)
         else:
-            om = _check_omega(omega)
+            om = float(check_omega(omega, "--omega"))
         Y = marching.fold(result.pattern, om)
         if aligned:
             Y = Y @ result.rotation.T + result.translation
-        data = json.dumps({"omega": om.tolist() if isinstance(om, np.ndarray) else om,
-                           "frame": "target" if aligned else "pattern",
-                           "designed_omega": result.omega, "Y": Y.tolist()})
+        data = {"omega": om, "frame": "target" if aligned else "pattern",
+                "designed_omega": result.omega, "Y": Y}
         if out is None:
-            typer.echo(data)
+            typer.echo(json.dumps(jsonable(data), allow_nan=False))
         else:
-            write_atomic(out, data.encode())
+            write_json(out, data)
             console.print(f"wrote {escape(str(out))}", highlight=False)
 
 
@@ -486,7 +412,7 @@ def export(
     result_dir: Path = typer.Argument(..., help="Folder of a saved design (result.json).",
                                       show_default=False),
     format: str = typer.Option(..., "--format", "-f", help="One of "
-                               f"{', '.join(EXPORT_NAMES)}.", show_default=False),
+                               f"{', '.join(EXPORTERS)}.", show_default=False),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write (default: "
                                        "RESULT_DIR/pattern.fold, crease.<fmt> or "
                                        "folded.<fmt>)."),
@@ -498,28 +424,18 @@ def export(
     Crease assignments and meshes are those at omega; the FOLD file holds 24 states from
     flat to omega.
     """
-    from . import io
-
     with user_errors():
         fmt = format.lower().lstrip(".")
-        if fmt not in EXPORT_NAMES:
+        if fmt not in EXPORTERS:
             raise InputError(f"unknown format {format!r}; choose one of "
-                             f"{', '.join(EXPORT_NAMES)}")
+                             f"{', '.join(EXPORTERS)}")
+        exporter = EXPORTERS[fmt]
         result = _load_result(result_dir)
-        om = result.omega if omega is None else _check_omega(omega)
-        path = out if out is not None else _result_folder(result_dir) / EXPORT_NAMES[fmt]
-        if fmt in ("obj", "ply", "glb") and path.suffix.lower() != f".{fmt}":
-            raise InputError(f"--format {fmt} writes a .{fmt} file, got {path}")
-        if fmt == "fold":
-            _write_fold(path, result, om)
-        elif fmt == "svg":
-            io.write_svg(path, result.pattern, om)
-        elif fmt == "pdf":
-            io.write_pdf(path, result.pattern, om)
-        elif fmt == "dxf":
-            io.write_dxf(path, result.pattern, om)
-        else:
-            io.write_mesh(path, result.pattern, om)
+        om = result.omega if omega is None else float(check_omega(omega, "--omega"))
+        path = out if out is not None else _result_folder(result_dir) / exporter.filename
+        if path.suffix.lower() != exporter.suffix:
+            raise InputError(f"--format {fmt} writes a {exporter.suffix} file, got {path}")
+        exporter.write(path, result.pattern, om, **_export_options(result))
     console.print(f"wrote {escape(str(path))}", highlight=False)
 
 
@@ -533,7 +449,11 @@ def render(
     frames: int = typer.Option(FRAMES, help="States in folding.gif."),
 ) -> None:
     """Render a saved design: render.png (the designed state with the target) and
-    folding.gif (the whole motion, from flat to folded flat)."""
+    folding.gif (the whole motion, from flat to folded flat).
+
+    Into an existing folder (the result's, by default) each file is written atomically and
+    nothing else changes; a new folder appears complete or not at all.
+    """
     from . import viz
 
     with user_errors():
@@ -545,8 +465,11 @@ def render(
         folder = out if out is not None else _result_folder(result_dir)
         check_out_dir(folder, force=True)
         omega_end = math.copysign(math.pi, result.omega)
-        with staged_dir(folder) as tmp:
-            _render_files(tmp, result, omega_end, frames)
+        if folder.is_dir():
+            _render_files(folder, result, omega_end, frames)
+        else:
+            with replace_folder(folder) as tmp:
+                _render_files(tmp, result, omega_end, frames)
     console.print(f"wrote {escape(str(folder / 'render.png'))} and "
                   f"{escape(str(folder / 'folding.gif'))}", highlight=False)
 
@@ -592,7 +515,8 @@ def march(
     lp: bool = typer.Option(False, help="Side lengths from the paper's LP (eq:linearP)."),
     omega: float = typer.Option(2.0, help="Fold parameter in [-pi, pi]."),
     frames: int = typer.Option(0, min=0, help="Also write K states from flat to omega."),
-    force: bool = typer.Option(False, "--force", help="Overwrite a non-empty output folder."),
+    force: bool = typer.Option(False, "--force", help="Replace a non-empty output folder "
+                               "(the whole folder)."),
 ) -> None:
     """March a (perturbed) Miura crease pattern and fold it; write the pattern and vertices."""
     from . import marching
@@ -607,16 +531,13 @@ def march(
             bd = side_length_lp(bd)
         pat = marching.march(bd)
         Y = marching.fold(pat, omega)
-        with staged_dir(out) as tmp:
-            write_atomic(tmp / "boundary.json", json.dumps(bd.to_dict()).encode())
-            write_atomic(tmp / "pattern.json", json.dumps(pat.to_dict()).encode())
-            write_atomic(tmp / "folded.json",
-                         json.dumps({"omega": omega, "Y": Y.tolist()}).encode())
+        with replace_folder(out) as tmp:
+            write_json(tmp / "boundary.json", bd)
+            write_json(tmp / "pattern.json", pat)
+            write_json(tmp / "folded.json", {"omega": omega, "Y": Y})
             if frames:
                 om = np.linspace(0.0, omega, frames)
-                states = marching.fold(pat, om)
-                write_atomic(tmp / "frames.json",
-                             json.dumps({"omega": om.tolist(), "Y": states.tolist()}).encode())
+                write_json(tmp / "frames.json", {"omega": om, "Y": marching.fold(pat, om)})
     spread = length_spread(pat.lh, pat.lv)
     Console().print(quantity_table(f"{rows} x {cols} panels, omega = {omega:g}", [
         ("smallest side / mean", f"{spread['min_over_mean']:.4g}"),

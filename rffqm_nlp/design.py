@@ -23,7 +23,7 @@ from . import numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
-from .io import read_toml
+from .files import read_toml
 from .results import DesignResult
 
 PI = np.pi

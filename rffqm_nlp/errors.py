@@ -9,6 +9,12 @@ class RffqmError(Exception):
     """Base class of every error raised on purpose by rffqm_nlp."""
 
 
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (runs of whitespace as one space); the name of its
+    type when it has no message."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 class InputError(RffqmError, ValueError):
     """Invalid input data (shape, value, option); the message names the offending item."""
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from .boundary import BoundaryData
 from .errors import InputError
-from .io import atomic_path
+from .files import atomic_path, jsonable
 from .pattern import Pattern
 
 FORMAT = "rffqm-nlp design result"
@@ -62,7 +62,7 @@ class DesignResult:
             "pattern": self.pattern.to_dict(), "folded": self.folded.tolist(),
             "target_points": self.target_points.tolist(), "rotation": self.rotation.tolist(),
             "translation": self.translation.tolist(), "fit": self.fit,
-            "stats": _jsonable(self.stats), "problem": _jsonable(self.problem),
+            "stats": jsonable(self.stats), "problem": jsonable(self.problem),
             "x": np.asarray(self.x).tolist(),
         }
 
@@ -103,15 +103,3 @@ class DesignResult:
         except json.JSONDecodeError as exc:
             raise InputError(f"{path} is not valid JSON: {exc}") from None
         return cls.from_dict(data)
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.floating, np.integer, np.bool_)):
-        return obj.item()
-    return obj

@@ -64,8 +64,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .design import DesignProblem
-from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed
-from .io import atomic_path, read_toml
+from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
+from .files import atomic_path, read_toml
 from .results import DesignResult
 
 if TYPE_CHECKING:
@@ -397,13 +397,13 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
             result = problem.solve(**config["solve"])
     except InfeasibleDesign as exc:
         row.update(status="infeasible", solver_status="Infeasible_Problem_Detected",
-                   reason=_one_line(exc))
+                   reason=one_line(exc))
     except SolverFailed as exc:
-        row.update(status="failed", solver_status=exc.status, reason=_one_line(exc),
+        row.update(status="failed", solver_status=exc.status, reason=one_line(exc),
                    **_stat_columns(exc.stats))
     except Exception as exc:  # a task turns every failure into a row
         row.update(status="error", solver_status="",
-                   reason=f"{type(exc).__name__}: {_one_line(exc)}")
+                   reason=f"{type(exc).__name__}: {one_line(exc)}")
     else:
         fit = {k: float(result.fit[k]) for k in FIT_COLUMNS}
         bad = [k for k, v in fit.items() if not math.isfinite(v)]
@@ -570,11 +570,11 @@ def _stream(client: "Client", designs: Iterable[Design], task: Task,
             else:
                 outcome = {"row": {"status": "worker_lost", "solver_status": "",
                                    "reason": f"its worker process died on each of its "
-                                             f"{tries[design.id]} tries ({_one_line(exc)})"},
+                                             f"{tries[design.id]} tries ({one_line(exc)})"},
                            "result": None}
         except Exception as exc:  # never lose a row to an error outside the task
             outcome = {"row": {"status": "error", "solver_status": "",
-                               "reason": f"{type(exc).__name__}: {_one_line(exc)}"},
+                               "reason": f"{type(exc).__name__}: {one_line(exc)}"},
                        "result": None}
         future.release()
         top_up()
@@ -602,7 +602,7 @@ def _client(scheduler: "str | Client | None", workers: int) -> Iterator["Client"
                                        processes=True, dashboard_address=":0",
                                        silence_logs=logging.ERROR, env=WORKER_ENV)
         except RuntimeError as exc:
-            raise RffqmError(f"could not start a local Dask cluster ({_one_line(exc)}); a "
+            raise RffqmError(f"could not start a local Dask cluster ({one_line(exc)}); a "
                              "script that runs a sweep must call it under `if __name__ == "
                              "\"__main__\":` (worker processes import the script)") from exc
         with cluster, Client(cluster) as client:
@@ -615,7 +615,7 @@ def _client(scheduler: "str | Client | None", workers: int) -> Iterator["Client"
         client = Client(scheduler, timeout=10)
     except (OSError, ValueError) as exc:
         raise InputError(f"cannot connect to the Dask scheduler at {scheduler!r} "
-                         f"({_one_line(exc)}); start one with `dask scheduler`, or use "
+                         f"({one_line(exc)}); start one with `dask scheduler`, or use "
                          "--scheduler local (a cluster on this machine) or none") from None
     with client:
         yield client
@@ -860,7 +860,3 @@ def _canonical(config: Any) -> str:
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) \
         and math.isfinite(value)
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__

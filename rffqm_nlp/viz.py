@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .io import COLORS, atomic_path, draw_creases, faces_vertices
+from .export import COLORS, draw_creases
+from .files import atomic_path
+from .foldfile import faces_vertices
 from .marching import check_omega, fold
 from .pattern import Pattern
 

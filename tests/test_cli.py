@@ -16,8 +16,7 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from rffqm_nlp import io as rio
-from rffqm_nlp import marching, surfaces, viz
+from rffqm_nlp import export, foldfile, marching, surfaces, viz
 from rffqm_nlp.cli import app
 from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import SolverFailed
@@ -91,7 +90,7 @@ def result(designed) -> DesignResult:
 @pytest.fixture
 def fake_solve(monkeypatch, result):
     """Replace the IPOPT solve by the module's saved result (file handling tests)."""
-    monkeypatch.setattr(DesignProblem, "solve", lambda self, **kw: result)
+    monkeypatch.setattr(DesignProblem, "solve", lambda self, *args, **kw: result)
 
 
 # --------------------------------------------------------------------------- design
@@ -109,7 +108,7 @@ def test_design_writes_every_file(designed, result):
 
     assert result.stats["success"] and result.pattern.N == 8 and result.pattern.M == 8
     assert result.fit["rms"] < result.fit["plane_rms"]
-    pat, omega, meta = rio.read_fold(out / "pattern.fold")
+    pat, omega, meta = foldfile.read_fold(out / "pattern.fold")
     assert omega == pytest.approx(result.omega)
     np.testing.assert_allclose(pat.X, result.pattern.X)
     assert meta["target"]["name"] == "sphere_cap" and meta["fit"] == result.fit
@@ -156,8 +155,8 @@ def test_design_panels_two_words_and_progress_lines(tmp_path, monkeypatch):
     assert "Levenberg-Marquardt iteration 0" in res.output
 
 
-def test_design_without_rendering_warns_and_force_keeps_other_files(tmp_path, fake_solve,
-                                                                    monkeypatch):
+def test_design_without_rendering_warns_and_force_replaces_the_folder(tmp_path, fake_solve,
+                                                                       monkeypatch):
     monkeypatch.setattr(viz, "rendering_available", lambda: (False, "no OpenGL here"))
     out = tmp_path / "out"
     out.mkdir()
@@ -166,8 +165,7 @@ def test_design_without_rendering_warns_and_force_keeps_other_files(tmp_path, fa
     res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", out, "--force")
     assert res.exit_code == 0, res.output
     assert "warning" in res.output and "no OpenGL here" in res.output
-    assert {p.name for p in out.iterdir()} == DESIGN_FILES | {"notes.txt"}
-    assert (out / "notes.txt").read_text() == "mine"
+    assert {p.name for p in out.iterdir()} == DESIGN_FILES          # replaced whole
     assert (out / "crease.svg").read_text() != "old"
     assert leftovers(tmp_path) == []
     DesignResult.load(out)
@@ -177,7 +175,7 @@ def test_failure_after_the_solve_leaves_no_files(tmp_path, fake_solve, monkeypat
     def broken(*args, **kw):
         raise OSError("No space left on device")
 
-    monkeypatch.setattr(rio, "write_dxf", broken)
+    monkeypatch.setitem(export.EXPORTERS, "dxf", export.Exporter("crease.dxf", broken))
     out = tmp_path / "deep" / "out"
     res = invoke("design", write_toml(tmp_path, "t.toml"), "--out", out, "-q")
     assert_user_error(res, "No space left on device")
@@ -213,7 +211,7 @@ def test_export_every_format(designed, result, tmp_path, fmt):
     assert res.exit_code == 0, res.output
     assert path.stat().st_size > 0
     if fmt == "fold":
-        pat, omega, _ = rio.read_fold(path)
+        pat, omega, _ = foldfile.read_fold(path)
         assert omega == 1.5 and pat.N == 8
     elif fmt in ("obj", "ply", "glb"):
         mesh = trimesh.load(path, force="mesh", process=False)
@@ -236,6 +234,26 @@ def test_render(designed, tmp_path):
     import imageio.v3 as iio
 
     assert iio.imread(out / "folding.gif", index=None).shape[0] == 4
+
+
+def test_render_into_a_result_folder_keeps_it(designed, tmp_path, monkeypatch):
+    """render writes its two files into an existing folder one by one (atomically each)
+    and never replaces the folder."""
+    monkeypatch.setattr(viz, "rendering_available", lambda: (True, ""))
+    monkeypatch.setattr(viz, "render_png", lambda path, *a, **kw: Path(path).write_text("png"))
+    monkeypatch.setattr(viz, "folding_gif", lambda path, *a, **kw: Path(path).write_text("gif"))
+    folder = tmp_path / "result"
+    folder.mkdir()
+    for name in ("result.json", "crease.svg"):
+        (folder / name).write_bytes((designed[0] / name).read_bytes())
+    (folder / "notes.txt").write_text("mine")
+    inode = folder.stat().st_ino
+    res = invoke("render", folder, "--frames", "3")
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in folder.iterdir()} == {"result.json", "crease.svg", "notes.txt",
+                                                  *RENDER_FILES}
+    assert folder.stat().st_ino == inode and (folder / "render.png").read_text() == "png"
+    assert leftovers(folder) == [] and leftovers(tmp_path) == []
 
 
 def test_render_without_rendering_fails_cleanly(designed, tmp_path, monkeypatch):
@@ -267,6 +285,11 @@ def test_march_still_works(tmp_path):
     assert {p.name for p in out.iterdir()} == {"boundary.json", "pattern.json",
                                                "folded.json", "frames.json"}
     assert np.asarray(json.loads((out / "frames.json").read_text())["Y"]).shape == (3, 5, 6, 3)
+    assert_user_error(invoke("march", "--out", out), "not empty", "--force")
+    res = invoke("march", "--rows", "2", "--cols", "2", "--out", out, "--force")
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} == {"boundary.json", "pattern.json", "folded.json"}
+    assert leftovers(tmp_path) == []
 
 
 # --------------------------------------------------------------------------- user errors

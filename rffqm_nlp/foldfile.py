@@ -1,24 +1,19 @@
-"""Files other tools open: FOLD 1.2, SVG/PDF/DXF crease patterns, OBJ/PLY/GLB folded meshes.
+"""FOLD 1.2 files: the numbering of vertices, edges and faces, writing, reading, validating.
 
-Numbering shared by every writer: vertex (i, j) (1-based) is FOLD vertex
-``(i-1)(M+1) + (j-1)``; the edges are the horizontal edges (i, j) -> (i, j+1) row by row,
-then the vertical edges (i, j) -> (i+1, j) row by row; the faces are the panels (i, j) row
-by row, counter-clockwise a, c, d, b in the flat pattern. Boundary edges are "B"; a crease
-is a valley "V" when its fold angle at the designed state is positive, else a mountain "M"
-(at omega = 0 the signs of the positive folding branch are used).
-
-Every file is written atomically: a temporary file in the target folder, then
-:func:`os.replace`.
+Numbering (shared with the crease and mesh writers of :mod:`rffqm_nlp.export`): vertex
+(i, j) (1-based) is FOLD vertex ``(i-1)(M+1) + (j-1)``; the edges are the horizontal edges
+(i, j) -> (i, j+1) row by row, then the vertical edges (i, j) -> (i+1, j) row by row; the
+faces are the panels (i, j) row by row, counter-clockwise a, c, d, b in the flat pattern.
+Boundary edges are "B"; a crease is a valley "V" when its fold angle at the designed state
+is positive, else a mountain "M" (at omega = 0 the signs of the positive folding branch are
+used).
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
-import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -26,69 +21,15 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError
-from .marching import check_omega, fold, fold_angles
-from .pattern import Pattern
+from .files import jsonable, write_json
+from .marching import fold, fold_angles
+from .pattern import Pattern, check_omega
 
-#: Stroke colours of the 2-D writers, as Origami Simulator expects on SVG import.
-COLORS: dict[str, str] = {"M": "#ff0000", "V": "#0000ff", "B": "#000000"}
-#: DXF layer and ACI colour of every kind (1 red, 5 blue, 7 white/black).
-DXF_LAYERS: dict[str, tuple[str, int]] = {"M": ("MOUNTAIN", 1), "V": ("VALLEY", 5),
-                                          "B": ("BOUNDARY", 7)}
 CREATOR = "rffqm-nlp"
 PREFIX = "rffqm:"
 ASSIGNMENTS = frozenset("BMVFU")
-#: Mesh formats of :func:`write_mesh`, by file suffix.
-MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".glb": "glb"}
 _RESERVED = ("omega", "pattern", "version")
 _ANGLE_TOL = 1e-9
-
-
-# --------------------------------------------------------------------------- files
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-FILE_MODE = 0o666 & ~_umask()
-DIR_MODE = 0o777 & ~_umask()
-
-
-def read_toml(path: str | os.PathLike, what: str = "file",
-              error: type[InputError] = InputError) -> dict[str, Any]:
-    """The tables of a TOML file; a missing or invalid file raises ``error`` naming ``what``
-    (e.g. "design file") and the path."""
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise error(f"no such {what}: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise error(f"{what} {path} is not valid TOML: {exc}") from None
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to ``path`` (same suffix); on success move it onto ``path``.
-
-    On an exception the temporary file is removed and ``path`` is left untouched.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.chmod(tmp, FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def _write_text(path: str | os.PathLike, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
 
 
 # --------------------------------------------------------------------------- numbering
@@ -139,32 +80,7 @@ def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
     return kinds
 
 
-def crease_segments(pat: Pattern, omega: float) -> list[tuple[np.ndarray, np.ndarray, str]]:
-    """Every edge of the flat pattern as (p0, p1, kind), p 2-D, kind in {"M", "V", "B"}."""
-    xy = pat.X[..., :2].reshape(-1, 2)
-    kinds = edge_assignments(pat, omega)
-    return [(xy[a].copy(), xy[b].copy(), str(k))
-            for (a, b), k in zip(edges_vertices(pat.N, pat.M), kinds)]
-
-
 # --------------------------------------------------------------------------- FOLD
-def _jsonable(value: Any) -> Any:
-    """numpy arrays and scalars -> lists and Python numbers, recursively; InputError for
-    anything JSON cannot hold."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if value is None or isinstance(value, (str, int, float, bool)):
-        return value
-    raise InputError(f"metadata value {value!r} ({type(value).__name__}) cannot be stored in "
-                     "JSON; use numbers, strings, lists, dicts or numpy arrays")
-
-
 def frame_omegas(omega: float, frames: int | np.ndarray | None) -> np.ndarray:
     """The omegas of the folding frames: ``frames`` values from 0 to ``omega`` or explicit."""
     if frames is None:
@@ -222,7 +138,7 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
     for key, value in (metadata or {}).items():
         if key in _RESERVED:
             raise InputError(f"metadata key {key!r} is reserved; choose another name")
-        d[PREFIX + str(key)] = _jsonable(value)
+        d[PREFIX + str(key)] = jsonable(value)
     return d
 
 
@@ -230,8 +146,7 @@ def write_fold(path: str | os.PathLike, pat: Pattern, omega: float,
                frames: int | np.ndarray | None = None,
                metadata: Mapping[str, Any] | None = None) -> Path:
     """Write :func:`fold_dict` as a ``.fold`` JSON file; returns the path."""
-    _write_text(path, json.dumps(fold_dict(pat, omega, frames, metadata), indent=1))
-    return Path(path)
+    return write_json(path, fold_dict(pat, omega, frames, metadata), indent=1)
 
 
 def _array(d: Mapping, key: str, problems: list[str], dtype=float) -> np.ndarray | None:
@@ -414,102 +329,3 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
     meta = {k[len(PREFIX):]: v for k, v in d.items()
             if k.startswith(PREFIX) and k[len(PREFIX):] not in _RESERVED}
     return pat, omega, meta
-
-
-# --------------------------------------------------------------------------- 2-D drawings
-def draw_creases(ax, pat: Pattern, omega: float, linewidth: float = 1.0) -> list:
-    """Draw every edge of the flat pattern on a matplotlib ``ax``: one Line2D per edge,
-    mountain red, valley blue, boundary black; equal aspect, no axes. Returns the lines."""
-    lines = []
-    for p0, p1, kind in crease_segments(pat, omega):
-        (line,) = ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color=COLORS[kind],
-                          linewidth=linewidth, solid_capstyle="round", clip_on=False)
-        lines.append(line)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
-    return lines
-
-
-def _crease_figure(pat: Pattern, omega: float, width_in: float = 8.0):
-    """A bare figure (no background, no axes) of the pattern, sized to its aspect ratio."""
-    from matplotlib.figure import Figure
-
-    xy = pat.X[..., :2].reshape(-1, 2)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    span = hi - lo
-    pad = 0.02 * span.max()
-    size = span + 2 * pad
-    fig = Figure(figsize=(width_in, width_in * size[1] / size[0]))
-    fig.patch.set_visible(False)
-    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
-    ax.patch.set_visible(False)
-    draw_creases(ax, pat, omega)
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    return fig
-
-
-def write_svg(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
-    """Crease pattern as SVG: one ``<path>`` per edge, stroke #ff0000 mountain, #0000ff
-    valley, #000000 boundary (Origami Simulator's import colours). Deterministic output."""
-    import matplotlib
-
-    fig = _crease_figure(pat, omega)
-    with matplotlib.rc_context({"svg.hashsalt": CREATOR, "svg.fonttype": "none"}), \
-            atomic_path(path) as tmp:
-        fig.savefig(tmp, format="svg", metadata={"Date": None})
-    return Path(path)
-
-
-def write_pdf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
-    """Crease pattern as PDF, styled as :func:`write_svg`."""
-    fig = _crease_figure(pat, omega)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="pdf", metadata={"CreationDate": None})
-    return Path(path)
-
-
-def write_dxf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
-    """Crease pattern as DXF (R2010, unitless): one LINE per edge on the layer MOUNTAIN (red),
-    VALLEY (blue) or BOUNDARY (white/black), for laser cutters and CAD."""
-    import ezdxf
-
-    doc = ezdxf.new("R2010", units=0)
-    for layer, color in DXF_LAYERS.values():
-        doc.layers.add(layer, color=color)
-    msp = doc.modelspace()
-    for p0, p1, kind in crease_segments(pat, omega):
-        msp.add_line(tuple(p0), tuple(p1), dxfattribs={"layer": DXF_LAYERS[kind][0]})
-    with atomic_path(path) as tmp:
-        doc.saveas(tmp)
-    return Path(path)
-
-
-# --------------------------------------------------------------------------- meshes
-def triangles(N: int, M: int) -> np.ndarray:
-    """Every panel split along its diagonal a-d into (a, c, d) and (a, d, b), (2NM, 3);
-    counter-clockwise in the flat pattern, so normals point to its +e3 side."""
-    q = faces_vertices(N, M)  # a, c, d, b
-    return np.stack([q[:, [0, 1, 2]], q[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
-
-
-def folded_mesh(pat: Pattern, omega: float):
-    """The folded state at ``omega`` as a ``trimesh.Trimesh`` ((N+1)(M+1) vertices, 2NM
-    triangles, vertex order of the FOLD file)."""
-    import trimesh
-
-    Y = fold(pat, float(check_omega(omega)))
-    return trimesh.Trimesh(vertices=Y.reshape(-1, 3), faces=triangles(pat.N, pat.M),
-                           process=False)
-
-
-def write_mesh(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
-    """Write the folded mesh as .obj, .ply (binary) or .glb (binary glTF) by the suffix."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in MESH_FORMATS:
-        raise InputError(f"mesh format {suffix!r} not supported; use one of "
-                         f"{sorted(MESH_FORMATS)}")
-    mesh = folded_mesh(pat, omega)
-    with atomic_path(path) as tmp:
-        mesh.export(tmp, file_type=MESH_FORMATS[suffix])
-    return Path(path)

@@ -1,50 +1,30 @@
-"""FOLD, SVG/PDF/DXF and mesh files: round trips, structure, styling, geometry."""
+"""FOLD 1.2 files: round trips, numbering, frames, validation of broken files."""
 
 from __future__ import annotations
 
 import copy
 import json
-import xml.etree.ElementTree as ET
 from collections import Counter
 
-import ezdxf
 import numpy as np
 import pytest
-import trimesh
+from crease_patterns import OMEGA, PATTERNS, expected_kinds, make_pattern, n_edges
 
 import rffqm_nlp as rq
-from rffqm_nlp import io as rio
-from rffqm_nlp import lengths, marching
+from rffqm_nlp import foldfile, marching
 from rffqm_nlp.errors import InputError
 
-OMEGA = 1.3
 
-
-@pytest.fixture(scope="module", params=["miura", "perturbed"])
+@pytest.fixture(scope="module", params=PATTERNS)
 def pat(request):
-    if request.param == "miura":
-        return marching.march(rq.miura_boundary(4, 5))
-    bd = rq.perturb_angles(rq.miura_boundary(6, 6), 0.01 * np.pi, seed=1)
-    return marching.march(lengths.side_length_lp(bd))
-
-
-def expected_kinds(pat, omega=OMEGA) -> Counter:
-    """M/V/B counts from the signs of marching.fold_angles (boundary edges known by place)."""
-    gh, gv = marching.fold_angles(pat, omega)
-    creases = np.concatenate([gh[1:-1].ravel(), gv[:, 1:-1].ravel()])
-    return Counter({"V": int(np.sum(creases > 0)), "M": int(np.sum(creases < 0)),
-                    "B": 2 * (pat.N + pat.M)})
-
-
-def n_edges(pat) -> int:
-    return (pat.N + 1) * pat.M + pat.N * (pat.M + 1)
+    return make_pattern(request.param)
 
 
 # --------------------------------------------------------------------------- FOLD
 def test_fold_round_trip(pat, tmp_path):
-    path = rio.write_fold(tmp_path / "p.fold", pat, OMEGA, frames=4,
+    path = foldfile.write_fold(tmp_path / "p.fold", pat, OMEGA, frames=4,
                           metadata={"target": "sphere_cap", "rms": np.float64(0.5)})
-    back, omega, meta = rio.read_fold(path)
+    back, omega, meta = foldfile.read_fold(path)
     assert omega == OMEGA
     assert meta == {"target": "sphere_cap", "rms": 0.5}
     for name in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X"):
@@ -52,14 +32,14 @@ def test_fold_round_trip(pat, tmp_path):
     d = json.loads(path.read_text())
     assert d["file_spec"] == 1.2 and d["file_creator"] == "rffqm-nlp"
     assert d["frame_classes"] == ["creasePattern"] and d["frame_attributes"] == ["2D"]
-    assert d["edges_vertices"] == rio.fold_dict(back, omega)["edges_vertices"]
+    assert d["edges_vertices"] == foldfile.fold_dict(back, omega)["edges_vertices"]
     assert len(d["vertices_coords"]) == (pat.N + 1) * (pat.M + 1)
     assert all(len(p) == 2 for p in d["vertices_coords"])
     assert len(d["faces_vertices"]) == pat.N * pat.M
 
 
 def test_fold_edges_match_fold_angles(pat):
-    d = rio.fold_dict(pat, OMEGA)
+    d = foldfile.fold_dict(pat, OMEGA)
     N, M = pat.N, pat.M
     assert len(d["edges_vertices"]) == n_edges(pat)
     assert Counter(d["edges_assignment"]) == expected_kinds(pat)
@@ -76,7 +56,7 @@ def test_fold_edges_match_fold_angles(pat):
 
 def test_fold_frames_equal_marching_fold(pat):
     omegas = np.array([-0.4, 0.0, 0.7, np.pi])
-    d = rio.fold_dict(pat, OMEGA, frames=omegas)
+    d = foldfile.fold_dict(pat, OMEGA, frames=omegas)
     assert len(d["file_frames"]) == 4
     for w, frame in zip(omegas, d["file_frames"]):
         assert frame["frame_classes"] == ["foldedForm"]
@@ -85,21 +65,21 @@ def test_fold_frames_equal_marching_fold(pat):
         Y = marching.fold(pat, w).reshape(-1, 3)
         np.testing.assert_allclose(frame["vertices_coords"], Y, rtol=0, atol=1e-12)
         assert Counter(frame["edges_assignment"]) == expected_kinds(pat, w or OMEGA)
-    assert rio.validate_fold(d) == []
-    counted = rio.fold_dict(pat, OMEGA, frames=5)["file_frames"]
+    assert foldfile.validate_fold(d) == []
+    counted = foldfile.fold_dict(pat, OMEGA, frames=5)["file_frames"]
     np.testing.assert_allclose([f["rffqm:omega"] for f in counted], np.linspace(0, OMEGA, 5))
 
 
 def test_fold_at_zero_uses_positive_branch(pat):
-    flat = rio.fold_dict(pat, 0.0)
+    flat = foldfile.fold_dict(pat, 0.0)
     assert Counter(flat["edges_assignment"]) == expected_kinds(pat)
     assert not np.any(flat["edges_foldAngle"])
-    assert rio.validate_fold(flat) == []
+    assert foldfile.validate_fold(flat) == []
 
 
 def test_validate_written_files(pat, tmp_path):
-    path = rio.write_fold(tmp_path / "p.fold", pat, OMEGA, frames=3)
-    assert rio.validate_fold(json.loads(path.read_text())) == []
+    path = foldfile.write_fold(tmp_path / "p.fold", pat, OMEGA, frames=3)
+    assert foldfile.validate_fold(json.loads(path.read_text())) == []
 
 
 def _corrupt(d: dict, how: str) -> dict:
@@ -135,127 +115,52 @@ def _corrupt(d: dict, how: str) -> dict:
     ("frame_angle", "file_frames[1]: edges_foldAngle disagrees with assignment 'M'")])
 def test_validate_finds_problems(how, words):
     pat = marching.march(rq.miura_boundary(2, 3))
-    problems = rio.validate_fold(_corrupt(rio.fold_dict(pat, OMEGA, frames=2), how))
+    problems = foldfile.validate_fold(_corrupt(foldfile.fold_dict(pat, OMEGA, frames=2), how))
     assert len(problems) == 1 and words in problems[0], problems
 
 
 def test_validate_survives_garbage():
-    assert rio.validate_fold([1, 2]) != []
-    assert rio.validate_fold({"file_spec": 1.2, "vertices_coords": [[0, "a"], [1]]}) != []
+    assert foldfile.validate_fold([1, 2]) != []
+    assert foldfile.validate_fold({"file_spec": 1.2, "vertices_coords": [[0, "a"], [1]]}) != []
     bad_faces = {"file_spec": 1.2, "vertices_coords": [[0, 0], [1, 0], [0, 1]],
                  "edges_vertices": [[0, 1]], "edges_assignment": [["B"]],
                  "faces_vertices": [[0, 1, "2"]]}
-    assert len(rio.validate_fold(bad_faces)) == 2
+    assert len(foldfile.validate_fold(bad_faces)) == 2
 
 
 def test_read_rejects_other_files(tmp_path):
     not_fold = tmp_path / "other.json"
     not_fold.write_text(json.dumps({"hello": "world"}))
     with pytest.raises(InputError, match="not a valid FOLD file"):
-        rio.read_fold(not_fold)
+        foldfile.read_fold(not_fold)
     broken = tmp_path / "broken.fold"
     broken.write_text("{ not json")
     with pytest.raises(InputError, match="JSON"):
-        rio.read_fold(broken)
-    foreign = rio.fold_dict(marching.march(rq.miura_boundary(2, 2)), OMEGA)
+        foldfile.read_fold(broken)
+    foreign = foldfile.fold_dict(marching.march(rq.miura_boundary(2, 2)), OMEGA)
     foreign = {k: v for k, v in foreign.items() if not k.startswith("rffqm:")}
     foreign["file_creator"] = "someone else"
     other = tmp_path / "foreign.fold"
     other.write_text(json.dumps(foreign))
     with pytest.raises(InputError, match="not one written by rffqm-nlp"):
-        rio.read_fold(other)
+        foldfile.read_fold(other)
 
 
 def test_read_rejects_edited_coordinates(tmp_path):
     pat = marching.march(rq.miura_boundary(2, 2))
-    d = rio.fold_dict(pat, OMEGA)
+    d = foldfile.fold_dict(pat, OMEGA)
     d["vertices_coords"][4][0] += 1e-3
     path = tmp_path / "edited.fold"
     path.write_text(json.dumps(d))
     with pytest.raises(InputError, match="do not match"):
-        rio.read_fold(path)
+        foldfile.read_fold(path)
 
 
 def test_reserved_metadata_and_bad_frames():
     pat = marching.march(rq.miura_boundary(2, 2))
     with pytest.raises(InputError, match="reserved"):
-        rio.fold_dict(pat, OMEGA, metadata={"omega": 1})
+        foldfile.fold_dict(pat, OMEGA, metadata={"omega": 1})
     with pytest.raises(InputError, match="cannot be stored in JSON"):
-        rio.fold_dict(pat, OMEGA, metadata={"when": object()})
+        foldfile.fold_dict(pat, OMEGA, metadata={"when": object()})
     with pytest.raises(InputError, match="frames"):
-        rio.fold_dict(pat, OMEGA, frames=0)
-
-
-# --------------------------------------------------------------------------- 2-D files
-def test_crease_segments(pat):
-    segs = rio.crease_segments(pat, OMEGA)
-    assert len(segs) == n_edges(pat)
-    assert Counter(k for *_, k in segs) == expected_kinds(pat)
-    assert all(p0.shape == (2,) and np.linalg.norm(p1 - p0) > 0 for p0, p1, _ in segs)
-
-
-def test_svg_one_coloured_path_per_crease(pat, tmp_path):
-    path = rio.write_svg(tmp_path / "p.svg", pat, OMEGA)
-    root = ET.parse(path).getroot()
-    strokes = []
-    for el in root.iter("{http://www.w3.org/2000/svg}path"):
-        style = dict(item.strip().split(":", 1) for item in el.get("style", "").split(";")
-                     if ":" in item)
-        strokes.append(style.get("stroke", "").strip())
-    colour = {v: k for k, v in rio.COLORS.items()}
-    assert Counter(colour[s] for s in strokes) == expected_kinds(pat)
-    again = rio.write_svg(tmp_path / "q.svg", pat, OMEGA)
-    assert path.read_bytes() == again.read_bytes()
-
-
-def test_pdf(pat, tmp_path):
-    path = rio.write_pdf(tmp_path / "p.pdf", pat, OMEGA)
-    assert path.read_bytes().startswith(b"%PDF")
-
-
-def test_dxf_layers(pat, tmp_path):
-    path = rio.write_dxf(tmp_path / "p.dxf", pat, OMEGA)
-    doc = ezdxf.readfile(path)
-    lines = doc.modelspace().query("LINE")
-    layer_kind = {name: k for k, (name, _) in rio.DXF_LAYERS.items()}
-    assert Counter(layer_kind[e.dxf.layer] for e in lines) == expected_kinds(pat)
-    assert doc.layers.get("MOUNTAIN").color == 1 and doc.layers.get("VALLEY").color == 5
-    assert doc.layers.get("BOUNDARY").color == 7
-
-
-def test_files_written_atomically(tmp_path):
-    pat = marching.march(rq.miura_boundary(2, 2))
-    target = tmp_path / "p.obj"
-    target.write_text("old")
-    with pytest.raises(InputError):
-        rio.write_mesh(tmp_path / "p.stl", pat, OMEGA)
-    rio.write_mesh(target, pat, OMEGA)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.obj"]
-    assert target.read_text() != "old"
-
-
-# --------------------------------------------------------------------------- meshes
-@pytest.mark.parametrize("suffix", [".obj", ".ply", ".glb"])
-def test_mesh_files(pat, tmp_path, suffix):
-    path = rio.write_mesh(tmp_path / f"p{suffix}", pat, OMEGA)
-    mesh = trimesh.load(path, force="mesh")
-    N, M = pat.N, pat.M
-    assert len(mesh.vertices) == (N + 1) * (M + 1)
-    assert len(mesh.faces) == 2 * N * M
-    edges = Counter(map(tuple, np.sort(mesh.edges, axis=1)))
-    assert sum(1 for n in edges.values() if n == 1) == 2 * (N + M)
-    expected = rio.folded_mesh(pat, OMEGA)
-    np.testing.assert_allclose(np.sort(mesh.vertices, axis=0),
-                               np.sort(expected.vertices, axis=0), atol=1e-6)
-    if suffix == ".glb":
-        assert path.read_bytes()[:4] == b"glTF"
-
-
-def test_folded_mesh_geometry(pat):
-    flat = rio.folded_mesh(pat, 0.0)
-    np.testing.assert_allclose(flat.face_normals, np.tile([0, 0, 1.0], (len(flat.faces), 1)),
-                               atol=1e-12)
-    folded = rio.folded_mesh(pat, OMEGA)
-    np.testing.assert_allclose(folded.vertices, marching.fold(pat, OMEGA).reshape(-1, 3))
-    # Panels stay rigid: every triangle keeps its flat area.
-    np.testing.assert_allclose(folded.area_faces, flat.area_faces, rtol=1e-9)
+        foldfile.fold_dict(pat, OMEGA, frames=0)
