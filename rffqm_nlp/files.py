@@ -195,7 +195,7 @@ def recover_folder(out: str | os.PathLike) -> None:
     folder aside and renaming the new one in): the complete new folder ("ready") is renamed
     in, else the old one ("aside") is moved back.
     """
-    out = Path(os.path.abspath(out))
+    out = Path(os.path.realpath(out))
     found = _leftovers(out)
     if not os.path.lexists(out):
         for kind in ("ready", "aside"):
@@ -246,7 +246,7 @@ def _swap_in(staging: Path, out: Path, token: str) -> None:
     if not os.path.lexists(out):
         os.rename(staging, out)
         return
-    if not out.is_dir() or out.is_symlink():
+    if not out.is_dir():
         raise InputError(f"{out} exists and is not a folder; choose another --out")
     if _exchange(staging, out):          # staging now holds the old folder
         shutil.rmtree(staging)
@@ -274,8 +274,9 @@ def replace_folder(out: str | os.PathLike) -> Iterator[Path]:
     (``renameat2(RENAME_EXCHANGE)``), else by two renames (old aside, new in), and then
     removed. On an exception the staging folder is removed and ``out`` is left as it was.
     What a killed run left next to ``out`` is recovered first (:func:`recover_folder`).
+    A symbolic link ``out`` keeps pointing to the folder, which is replaced.
     """
-    out = Path(os.path.abspath(out))
+    out = Path(os.path.realpath(out))
     out.parent.mkdir(parents=True, exist_ok=True)
     recover_folder(out)
     token = secrets.token_hex(4)

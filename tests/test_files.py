@@ -197,3 +197,13 @@ def test_kill_at_every_step_leaves_old_or_new(tmp_path, exchange):
     assert (OLD, OLD) in outcomes and (NEW, NEW) in outcomes
     # Two renames leave ``out`` missing for one step; the next run renames the new one in.
     assert ((None, NEW) in outcomes) == (not exchange)
+
+
+def test_replace_folder_through_a_symlink(tmp_path):
+    fill(tmp_path / "real", OLD)
+    (tmp_path / "link").symlink_to("real")
+    with files.replace_folder(tmp_path / "link") as stage:
+        assert stage.parent == tmp_path
+        fill(stage, NEW)
+    assert (tmp_path / "link").is_symlink() and snapshot(tmp_path / "link") == NEW
+    assert snapshot(tmp_path / "real") == NEW and hidden(tmp_path) == []
