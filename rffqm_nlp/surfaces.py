@@ -16,7 +16,8 @@ Conventions:
 
 Built-ins (:func:`names`, :func:`get`) validate their parameters and domain on construction,
 users add their own with :class:`Custom`, and a design file's ``[target]`` table names one
-of either (:func:`from_config`, :func:`load`, :meth:`Surface.to_config`).
+of either (:func:`from_config`, :func:`load`, :meth:`Surface.to_config`). A designer's mesh or
+point cloud becomes a surface with :class:`Mesh` (module ``rffqm_nlp.meshes``).
 """
 
 from __future__ import annotations
@@ -762,3 +763,6 @@ def _solve_extent(residual: Callable[[float], float], most: float) -> float:
     if residual(most) <= 0:
         return most
     return brentq(residual, 0.0, most, xtol=1e-15 * most, rtol=4 * np.finfo(float).eps)
+
+
+from .meshes import Mesh  # noqa: E402  (meshes and point clouds as targets: rffqm_nlp.meshes)

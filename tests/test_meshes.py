@@ -1,0 +1,208 @@
+"""rffqm_nlp.meshes: meshes and point clouds as target surfaces (Mesh), their topology
+checks, parametrization, spline fit and distances to the shape."""
+
+import re
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import Delaunay
+
+import rffqm_nlp as rq
+from rffqm_nlp.errors import SurfaceError
+from rffqm_nlp.meshes import MAX_DEVIATION, Mesh, shape_distances
+
+
+def _lattice_error(mesh: Mesh, surface) -> float:
+    """Largest distance of the Mesh's 20 x 20 lattice to the original surface, over its
+    diameter."""
+    return float(surface.closest_points(mesh.lattice(20, 20))[2].max() / surface.diameter())
+
+
+@pytest.mark.parametrize("name, fmt", [("sphere_cap", "obj"), ("saddle", "stl"),
+                                       ("torus_patch", "ply"), ("quarter_vase", "obj"),
+                                       ("hyperboloid", "stl"), ("ellipsoid_cap", "ply"),
+                                       ("gaussian_bump", "off"), ("cylinder", "glb")])
+def test_mesh_files_reload_onto_the_surface(tmp_path, name, fmt):
+    surface = rq.surfaces.get(name)
+    path = tmp_path / f"{name}.{fmt}"
+    surface.mesh(41, 41).export(path)
+    mesh = Mesh(path)
+    assert isinstance(mesh, rq.surfaces.Mesh)
+    assert mesh.parametrization == "projection"
+    assert len(mesh.points) == 41 * 41  # STL's triangle soup merged back
+    assert _lattice_error(mesh, surface) < 0.002
+    assert mesh.deviation_max < MAX_DEVIATION and mesh.deviation_rms <= mesh.deviation_max
+    assert mesh.to_config() == {"mesh": str(path)}
+
+
+def test_irregular_triangulation(tmp_path):
+    surface = rq.surfaces.get("paraboloid")
+    (u0, u1), (v0, v1) = surface.domain
+    rng = np.random.default_rng(3)
+    s = rng.uniform(0, 1, size=(4, 30))  # random points on the four sides too
+    sides = np.r_[np.c_[u0 + (u1 - u0) * s[0], np.full(30, v0)],
+                  np.c_[u0 + (u1 - u0) * s[1], np.full(30, v1)],
+                  np.c_[np.full(30, u0), v0 + (v1 - v0) * s[2]],
+                  np.c_[np.full(30, u1), v0 + (v1 - v0) * s[3]]]
+    uv = np.r_[rng.uniform((u0, v0), (u1, v1), size=(1500, 2)), sides,
+               [[u0, v0], [u0, v1], [u1, v0], [u1, v1]]]
+    faces = Delaunay(uv).simplices
+    trimesh.Trimesh(surface.point(uv[:, 0], uv[:, 1]), faces).export(tmp_path / "irr.ply")
+    mesh = Mesh(tmp_path / "irr.ply")
+    assert _lattice_error(mesh, surface) < 0.002
+
+
+def test_general_disk_uses_a_conformal_map():
+    """A cylinder strip bent by 172 deg is no graph over its plane: LSCM parametrizes it."""
+    surface = rq.surfaces.get("cylinder", domain=((-2.0, 2.0), (-1.5, 1.5)))
+    mesh = Mesh(surface.mesh(41, 41))
+    assert mesh.parametrization == "lscm"
+    assert _lattice_error(mesh, surface) < 0.002
+    # the domain covers most of the (developable) strip: area close to the surface's
+    (a, b), (c, d) = mesh.domain
+    assert (b - a) * (d - c) > 0.9 * surface.mesh(41, 41).area
+
+
+def test_sphere_cap_curvature_from_the_spline():
+    radius = 4.0
+    surface = rq.surfaces.get("sphere_cap", radius=radius)
+    mesh = Mesh(surface.mesh(61, 61))
+    (a, b), (c, d) = mesh.domain
+    u, v = np.linspace(a, b, 9)[2:-2], np.linspace(c, d, 9)[2:-2]
+    k = mesh.gaussian_curvature(u[:, None], v[None, :])
+    assert np.allclose(k, 1 / radius ** 2, rtol=0.03)
+    # r_u x r_v agrees with the mesh's faces (outward): H = -1/R
+    assert np.allclose(mesh.mean_curvature(u[:, None], v[None, :]), -1 / radius, rtol=0.03)
+
+
+def test_point_cloud_fit_is_below_the_noise():
+    surface = rq.surfaces.get("sphere_cap", radius=4.0)
+    sigma = 0.002 * surface.diameter()
+    rng = np.random.default_rng(7)
+    points = surface.sample(60, 60).reshape(-1, 3)
+    cloud = Mesh(points + rng.normal(scale=sigma, size=points.shape))
+    assert cloud.mesh is None and cloud.parametrization == "projection"
+    u, v = cloud.grid_uv(30, 30)
+    fitted = cloud.point(u[:, None], v[None, :])
+    dist = surface.closest_points(fitted)[2]
+    assert np.sqrt(np.mean(dist ** 2)) < sigma
+    assert cloud.deviation_rms == pytest.approx(sigma / surface.diameter(), rel=0.3)
+
+
+def test_point_cloud_file(tmp_path):
+    surface = rq.surfaces.get("gaussian_bump")
+    path = tmp_path / "bump.xyz"
+    np.savetxt(path, surface.sample(40, 40).reshape(-1, 3))
+    cloud = Mesh(path)
+    assert cloud.mesh is None
+    assert _lattice_error(cloud, surface) < 0.002
+
+
+def test_closest_points_are_exact_on_the_mesh():
+    plane = rq.surfaces.get("plane")
+    mesh = Mesh(plane.mesh(11, 11))
+    rng = np.random.default_rng(0)
+    above = np.c_[rng.uniform(-1.5, 1.5, size=(50, 2)), rng.uniform(-1, 1, size=50)]
+    uv, closest, dist = mesh.closest_points(above.reshape(5, 10, 3))
+    assert uv.shape == (5, 10, 2) and dist.shape == (5, 10)
+    assert np.allclose(closest.reshape(-1, 3), np.c_[above[:, :2], np.zeros(50)], atol=1e-12)
+    assert np.allclose(dist.ravel(), np.abs(above[:, 2]), atol=1e-12)
+    assert np.allclose(mesh.point(uv[..., 0], uv[..., 1]), closest, atol=1e-9)
+    assert np.allclose(mesh.distance(above), np.abs(above[:, 2]), atol=1e-12)
+    rms, worst = shape_distances(mesh, above)
+    assert worst == pytest.approx(np.abs(above[:, 2]).max() / mesh.diameter())
+    assert rms == pytest.approx(np.sqrt(np.mean(above[:, 2] ** 2)) / mesh.diameter())
+
+
+def test_shape_distances_of_a_parametric_target():
+    surface = rq.surfaces.get("sphere_cap", radius=4.0)
+    points = surface.lattice(4, 4) * 1.01  # 1% of the radius outside the sphere
+    rms, worst = shape_distances(surface, points)
+    assert rms == pytest.approx(0.04 / surface.diameter(), rel=1e-6)
+    assert worst == pytest.approx(rms, rel=1e-6)
+
+
+def test_a_spline_too_coarse_for_the_shape_is_refused():
+    bump = rq.surfaces.get("gaussian_bump", width=0.4)
+    with pytest.raises(SurfaceError, match=r"deviates .* pass more knots") as info:
+        Mesh(bump.mesh(61, 61), knots=(4, 4))
+    assert "\n" not in str(info.value)
+    assert Mesh(bump.mesh(61, 61)).deviation_max < MAX_DEVIATION
+
+
+@pytest.mark.parametrize("kwargs, found", [({"knots": (2, 30)}, "knots must be"),
+                                           ({"knots": 12}, "knots must be"),
+                                           ({"smoothing": -1.0}, "smoothing must be")])
+def test_bad_options(kwargs, found):
+    with pytest.raises(SurfaceError, match=found):
+        Mesh(rq.surfaces.get("plane").mesh(5, 5), **kwargs)
+
+
+def test_arrays_cannot_be_saved_as_config():
+    mesh = Mesh(rq.surfaces.get("plane").mesh(5, 5))
+    with pytest.raises(SurfaceError, match="cannot be saved as config"):
+        mesh.to_config()
+
+
+def _plane_grid(n: int = 9) -> trimesh.Trimesh:
+    return rq.surfaces.get("plane").mesh(n, n)
+
+
+def _two_pieces() -> trimesh.Trimesh:
+    a = _plane_grid(5)
+    b = a.copy()
+    b.apply_translation([10.0, 0.0, 0.0])
+    return trimesh.util.concatenate([a, b])
+
+
+def _with_hole() -> tuple[np.ndarray, np.ndarray]:
+    grid = _plane_grid(9)
+    keep = np.ones(len(grid.faces), dtype=bool)
+    keep[70:74] = False  # two interior cells (4, 3) and (4, 4)
+    return grid.vertices, grid.faces[keep]
+
+
+def _non_manifold() -> tuple[np.ndarray, np.ndarray]:
+    grid = _plane_grid(9)
+    fin = grid.faces[50]
+    vertices = np.r_[grid.vertices, [[0.0, 0.0, 1.0]]]
+    return vertices, np.r_[grid.faces, [[fin[0], fin[1], len(vertices) - 1]]]
+
+
+@pytest.mark.parametrize("make, found", [
+    (lambda: trimesh.creation.icosphere(), "closed surface"),
+    (_two_pieces, "2 separate pieces"),
+    (_with_hole, "2 boundary loops"),
+    (_non_manifold, "1 non-manifold edges"),
+    (lambda: np.random.default_rng(0).normal(size=(10, 3)), "only 10 distinct points"),
+    (lambda: (np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), np.array([[0, 1, 2]])),
+     "non-finite"),
+])
+def test_bad_shapes_raise_one_line(make, found):
+    with pytest.raises(SurfaceError) as info:
+        Mesh(make())
+    message = str(info.value)
+    assert "\n" not in message and found in message
+
+
+_GARBAGE = np.random.default_rng(0).bytes(4096)
+
+
+@pytest.mark.parametrize("name, content, found", [
+    ("empty.stl", b"", "no triangles and no points"),
+    ("garbage.stl", _GARBAGE, r"cannot read .*garbage\.stl as a mesh"),
+    ("garbage.ply", _GARBAGE, r"cannot read .*garbage\.ply as a mesh"),
+    ("garbage.obj", _GARBAGE, r"cannot read .*garbage\.obj as a mesh"),
+    ("notes.obj", b"this is not a mesh\n" * 20, "no triangles and no points"),
+    ("notes.txt", b"hello\n", "cannot read .*notes.txt as a mesh"),
+    ("missing.obj", None, "no such file"),
+])
+def test_bad_files_raise_one_line(tmp_path, name, content, found):
+    path = tmp_path / name
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(SurfaceError) as info:
+        Mesh(path)
+    message = str(info.value)
+    assert "\n" not in message and re.search(found, message)
