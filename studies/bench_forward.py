@@ -9,7 +9,7 @@ For N x N panels (default 10, 100, 300, 1000) it times, in one run,
 for the CasADi graph of :mod:`rffqm_nlp.marching` (graph build = first call of
 ``pattern_function`` / ``fold_function`` with every lru_cache of the module cleared;
 evaluation = best of ``--repeat`` calls of ``march`` / ``fold``), the NumPy model
-:mod:`rffqm_nlp.numpy_model`, and the per-panel loop of :mod:`studies.forward_baseline`.
+:mod:`rffqm_nlp.numpy_model`, and the per-panel loop of ``tests/forward_oracle.py``.
 The input is a Miura-ori (alpha0 = 1.2, a = b = 1) with boundary angles perturbed by
 1e-3*pi, or the largest smaller amplitude that still marches with Miura lengths.
 
@@ -21,29 +21,28 @@ default, so other jobs on a shared machine do not inflate them; ``--clock wall``
 wall-clock time (both are logged). Results are printed and written as Markdown.
 
 Usage: ``python studies/bench_forward.py [--sizes 10,100] [--repeat 3] [--omegas 100]
-[--clock cpu|wall] [--budget 60] [--out studies/results/bench_forward.md]``.
+[--clock cpu|wall] [--budget 60] [--out studies/results/bench_forward.md]``;
+``--smoke``: 4 x 4 panels, one call per timing, 4 omegas, output to a temporary folder.
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import gc
 import math
-import os
 import platform
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import casadi
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import rffqm_nlp as rq  # noqa: E402
+from common import Run, add_smoke, smoke_dir  # noqa: E402
 from rffqm_nlp import marching as mg  # noqa: E402
 from rffqm_nlp import numpy_model as nm  # noqa: E402
 from tests.forward_oracle import fold_loop, march_loop  # noqa: E402
@@ -380,23 +379,21 @@ def main(argv=None) -> None:
                         help="process CPU time (default; robust on a shared machine) or wall")
     parser.add_argument("--out", default=str(ROOT / "studies/results/bench_forward.md"),
                         help="Markdown output ('' to skip)")
+    add_smoke(parser)
     args = parser.parse_args(argv)
+    if args.smoke:
+        args.sizes, args.repeat, args.omegas = "4", 1, 4
+        args.out = str(smoke_dir("bench_forward") / "bench_forward.md")
     sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
     global CLOCK
     CLOCK = args.clock
     bench = Bench(args)
-    load0 = os.getloadavg()
-    t0 = time.perf_counter()
+    run = Run()
     for n in sizes:
         bench.run_size(n)
-    total = time.perf_counter() - t0
-    load1 = os.getloadavg()
+    total = run.elapsed()
     meta = [
-        f"- date: {dt.datetime.now().isoformat(timespec='seconds')}; machine: "
-        f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}",
-        f"- Python {platform.python_version()}, NumPy {np.__version__}, CasADi "
-        f"{casadi.__version__}; load average (1 min) {load0[0]:.1f} at start, "
-        f"{load1[0]:.1f} at end; whole run {total:.0f} s",
+        f"- {run.header()}; {platform.platform()}",
         "- input: Miura-ori (alpha0 = 1.2, a = b = 1, Miura lengths), boundary angles perturbed "
         "(seed 0) by " + ", ".join(f"{bench.amplitude[n]:g}*pi at {n}x{n}" for n in sizes)
         + " (the largest of 1e-3*pi, 5e-4*pi, ... that marches)",
@@ -406,7 +403,7 @@ def main(argv=None) -> None:
         "- CasADi build: first call of pattern_function / fold_function with the lru_caches "
         "cleared (one-off per size); CasADi eval: marching.march / marching.fold (DM conversion "
         "included); the K-omega fold builds its map inside fold",
-        f"- loop: studies/forward_baseline.py (per-panel Python); loop cells estimated above "
+        f"- loop: tests/forward_oracle.py (per-panel Python); loop cells estimated above "
         f"{args.budget:g} s (model cells: {args.model_budget:g} s) are skipped (estimate: "
         "per-panel cost of the last measured size, or K x one fold); speed-up = loop time / "
         "model time (est. = against the estimate)",
@@ -416,10 +413,12 @@ def main(argv=None) -> None:
     print()
     bench.print_table(sizes)
     print(f"whole run: {total:.0f} s")
+    text = bench.markdown(sizes, meta)
+    print(text)
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(bench.markdown(sizes, meta))
+        out.write_text(text)
         print(f"wrote {out}")
 
 

@@ -24,97 +24,42 @@ status, peak RSS of the subprocess).
 Part C: IPOPT (sequential) alone at 20x20 (--ipopt-only), in the part B table.
 
     python studies/bench_inverse.py [--sizes 8 12] [--budget 120] [--ipopt-only 20]
+    python studies/bench_inverse.py --smoke   (4 x 4 panels, a 1 s budget, temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
-import resource
-import subprocess
-import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
 
+from common import RESULTS, Run, add_smoke, fmt, smoke_dir, solve_in_child, target_problem
 from rffqm_nlp import numpy_model, shape
 from rffqm_nlp.boundary import BoundaryData
-from rffqm_nlp.design import DesignProblem
-from rffqm_nlp.errors import RffqmError, SolverFailed
+from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.errors import RffqmError
 
-ROOT = Path(__file__).resolve().parent.parent
 TARGET = "sphere_cap"  # a bundled target file, targets/<TARGET>.toml
 LARGE = 1e6  # objective value of a boundary vector that does not march
 FEASIBLE = 1e-9  # constraint violation of a feasible IPOPT iterate (design._IterationLog)
-
-
 LAYOUT = "zigzag_i"  # pinned (the package default and the bundled targets' since 945512b)
+#: Part A compares the sequential NLP with IPOPT and the exact Hessian, to its tolerance
+SOLVE = {"solver": "ipopt", "transcription": "sequential", "hessian": "exact",
+         "stop_rms": None}
 
 
-def problem(n: int, target: str = TARGET, **kw) -> DesignProblem:
-    kw.setdefault("layout", LAYOUT)
-    kw.setdefault("transcription", "sequential")  # Part A compares the sequential NLP
-    kw.setdefault("stop_rms", None)
-    kw.setdefault("hessian", "exact")  # the target file's Gauss-Newton came later
-    kw.setdefault("solver", "ipopt")  # and its Levenberg-Marquardt later still
-    return replace(DesignProblem.load(ROOT / "targets" / f"{target}.toml"), panels=(n, n),
-                   **kw)
+def problem(n: int, layout: str) -> DesignProblem:
+    return target_problem(TARGET, n, layout=layout)[0]
 
 
-# ------------------------------------------------------------------ IPOPT in a subprocess
-def vm_hwm_mb() -> float:
-    """Peak resident set size of this process (VmHWM; unlike ru_maxrss it is not inherited
-    from the forking parent)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
-def child(n: int, transcription: str, time_limit: float | None, max_iter: int,
-          stop_rms: float | None = None, target: str = TARGET,
-          hessian: str = "exact", solver: str = "ipopt") -> dict:
-    """One design solve; returns a JSON-ready dict (runs in its own process)."""
-    rss0 = vm_hwm_mb()
-    prob = problem(n, target, transcription=transcription, time_limit=time_limit,
-                   max_iter=max_iter, stop_rms=stop_rms, hessian=hessian, solver=solver)
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    out: dict = {"n": n, "transcription": transcription, "solver": solver}
-    try:
-        res = prob.solve()
-        stats, x = res.stats, res.x
-        out.update(success=True, fit=res.fit)
-    except SolverFailed as exc:
-        stats, x = exc.stats, exc.last_iterate
-        out.update(success=False, error=str(exc))
-    out["wall"] = time.perf_counter() - t0
-    out["cpu"] = time.process_time() - c0
-    out["rss0_mb"] = rss0
-    out["peak_rss_mb"] = vm_hwm_mb()
-    out.update({k: stats[k] for k in ("status", "iterations", "solve_time", "build_time",
-                                      "objective")})
-    out["history"] = stats["history"]
-    out["x"] = None if x is None else np.asarray(x, dtype=float).tolist()
-    return out
-
-
-def run_child(n: int, transcription: str, time_limit: float | None = None,
-              max_iter: int = 1000, stop_rms: float | None = None, target: str = TARGET,
-              hessian: str = "exact", solver: str = "ipopt") -> dict:
-    cmd = [sys.executable, __file__, "--child", str(n), transcription,
-           str(time_limit or 0), str(max_iter), LAYOUT, str(stop_rms or 0), target, hessian,
-           solver]
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    if proc.returncode:
-        raise RuntimeError(f"child {cmd} failed:\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+def run_ipopt(n: int, layout: str, transcription: str = "sequential", **solve) -> dict:
+    """One IPOPT solve of the n x n sphere cap in a fresh subprocess."""
+    return solve_in_child(TARGET, n, {"layout": layout},
+                          {**SOLVE, "transcription": transcription, **solve})
 
 
 # ------------------------------------------------------------------ the NumPy objective
@@ -255,13 +200,8 @@ def first_time(t, f, level):
     return float(np.asarray(t)[hit[0]]) if hit.size else None
 
 
-def fmt(v, spec=".3g", none="-"):
-    return none if v is None else format(v, spec)
-
-
 # ------------------------------------------------------------------ main
 def main() -> None:
-    global LAYOUT
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="*", default=[8, 12])
     ap.add_argument("--budget", type=float, default=120.0, help="L-BFGS-B seconds per case")
@@ -270,19 +210,22 @@ def main() -> None:
     ap.add_argument("--ipopt-only", type=int, nargs="*", default=[20],
                     help="extra sizes for IPOPT (sequential) alone")
     ap.add_argument("--layout", default=LAYOUT, help="Miura layout of the start")
-    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "bench_inverse.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "bench_inverse.md")
+    add_smoke(ap)
     args = ap.parse_args()
-    LAYOUT = args.layout
-    T0 = time.perf_counter()
-    load0 = os.getloadavg()[0]
+    if args.smoke:
+        args.sizes, args.budget, args.sim_time, args.ipopt_only = [4], 1.0, 20.0, []
+        args.out = smoke_dir("bench_inverse") / "bench_inverse.md"
+    layout = args.layout
+    run = Run()
     checks, rows_a, rows_b = [], [], []
     seq_runs = {}
     for n in args.sizes:
         print(f"== {n}x{n}: IPOPT (sequential) ...", flush=True)
-        ip = run_child(n, "sequential")
+        ip = run_ipopt(n, layout)
         seq_runs[n] = ip
-        prob = problem(n)
-        nlp = prob.transcribe()
+        prob = problem(n, layout)
+        nlp = prob.transcribe(options=SolveOptions(**SOLVE))
         f_ca = ca.Function("f", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals)])
         loss = NumpyLoss(prob)
         h = ip["history"]
@@ -295,7 +238,7 @@ def main() -> None:
             # the last iterate is not IPOPT's best: re-run to the best feasible iterate
             print(f"   IPOPT {ip['status']}; re-running to its best feasible iterate {k_best}",
                   flush=True)
-            again = run_child(n, "sequential", max_iter=max(k_best, 1))
+            again = run_ipopt(n, layout, max_iter=max(k_best, 1))
             x_ip = np.array(again["x"])
             label_ip = f"IPOPT iterate {k_best} (best feasible)"
         f_ip = float(obj[k_best])
@@ -362,7 +305,7 @@ def main() -> None:
             else:
                 print(f"== {n}x{n}: IPOPT simultaneous (time limit {args.sim_time:.0f} s) ...",
                       flush=True)
-                r = run_child(n, tr, time_limit=args.sim_time)
+                r = run_ipopt(n, layout, tr, time_limit=args.sim_time)
             h = r["history"]
             obj, inf = np.array(h["objective"]), np.array(h["inf_pr"])
             feas = inf <= 1e-6
@@ -374,7 +317,7 @@ def main() -> None:
             print(rows_b[-1], flush=True)
     for n in args.ipopt_only:
         print(f"== {n}x{n}: IPOPT (sequential) only ...", flush=True)
-        r = run_child(n, "sequential")
+        r = run_ipopt(n, layout)
         h = r["history"]
         obj, inf = np.array(h["objective"]), np.array(h["inf_pr"])
         feas = inf <= 1e-6
@@ -383,18 +326,13 @@ def main() -> None:
                       f"{r['objective']:.4g} | {obj[feas].min():.4g} | {inf[-1]:.1e} | "
                       f"{r['rss0_mb']:.0f} | {r['peak_rss_mb']:.0f} |")
         print(rows_b[-1], flush=True)
-    total = time.perf_counter() - T0
     md = [
         "# Inverse-design benchmark (`studies/bench_inverse.py`)",
         "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; {platform.machine()}, {os.cpu_count()} "
-        f"CPUs; Python {platform.python_version()}, NumPy {np.__version__}, CasADi "
-        f"{ca.__version__}; load average (1 min) {load0:.1f} at start, {os.getloadavg()[0]:.1f} "
-        f"at end (the load includes this run's own processes; "
-        f"no other job ran at the same time); whole run {total:.0f} s",
-        f"- problem: targets/sphere_cap.toml at 2N x 2N panels, layout {LAYOUT}, stop_rms=None, "
+        f"- {run.header()} (the load includes this run's own processes)",
+        f"- problem: targets/sphere_cap.toml at 2N x 2N panels, layout {layout}, stop_rms=None, "
         "default weights "
-        f"{problem(8).weights}, min_length 0.2, min_angle 0.15, mu_margin 0.02; same Miura start "
+        f"{problem(4, layout).weights}, min_length 0.2, min_angle 0.15, mu_margin 0.02; same Miura start "
         "(prob.start()) and same x0 for both methods",
         "- IPOPT: `prob.solve()` (sequential transcription, exact Hessian, MUMPS, inline "
         "constraints), one fresh subprocess per run; total time = wall seconds of "
@@ -445,10 +383,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "--child":
-        n, tr, tl, mi = int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), int(sys.argv[5])
-        LAYOUT = sys.argv[6]
-        print(json.dumps(child(n, tr, tl or None, mi, float(sys.argv[7]) or None,
-                               *sys.argv[8:11])))
-    else:
-        main()
+    main()

@@ -7,7 +7,7 @@ that well (the target files' 0.9% is what the README's main job uses). Two metho
 size: the sequential and the simultaneous transcription with IPOPT, or, with ``--solver
 levenberg-marquardt``, IPOPT and Levenberg-Marquardt on the marching manifold, both on the
 simultaneous NLP. ``--simultaneous-only`` sizes run the second method only. Each run is
-``DesignProblem.solve()`` in a fresh subprocess (``bench_inverse.run_child``) so its time
+``DesignProblem.solve()`` in a fresh subprocess (``common.solve_in_child``) so its time
 and peak memory are its own. Runs above ``--limit-from`` panels get a wall-time limit of
 ``--time-limit`` seconds; a run that hits it is reported with its status, not dropped. The
 ratio column compares the second method with the first at the same size in the same run.
@@ -20,23 +20,20 @@ ratio column compares the second method with the first at the same size in the s
     python studies/bench_scaling.py --solver levenberg-marquardt --sizes 10 20 40 100
         --simultaneous-only 200 --stop-rms 0.009 --time-limit 3600
         --out studies/results/bench_scaling_lm.md
+    python studies/bench_scaling.py --smoke   (4 x 4 panels, temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import platform
-import time
 from pathlib import Path
 
-import casadi as ca
-import numpy as np
-
-from bench_inverse import TARGET, run_child
+from common import RESULTS, ROOT, Run, add_smoke, fmt, smoke_dir, solve_in_child
 from rffqm_nlp.design import HESSIANS, SOLVERS
 
-ROOT = Path(__file__).resolve().parent.parent
+TARGET = "sphere_cap"
+LAYOUT = "zigzag_i"
 
 
 def label(transcription: str, solver: str) -> str:
@@ -48,8 +45,8 @@ def row(r: dict, ratio: str) -> str:
     rms = f"{100 * fit['rms']:.2f}%" if "rms" in fit else "-"
     return (f"| {r['n']}x{r['n']} | {label(r['transcription'], r['solver'])} | "
             f"{r['wall']:.1f} | "
-            f"{r['build_time']:.1f} | {r['iterations']} | {r['status']} | "
-            f"{r['objective']:.6g} | {rms} | {r['peak_rss_mb']:.0f} | {ratio} |")
+            f"{fmt(r.get('build_time'), '.1f')} | {r['iterations']} | {r['status']} | "
+            f"{fmt(r.get('objective'), '.6g')} | {rms} | {r['peak_rss_mb']:.0f} | {ratio} |")
 
 
 def main() -> None:
@@ -63,10 +60,13 @@ def main() -> None:
                     choices=sorted(p.stem for p in (ROOT / "targets").glob("*.toml")))
     ap.add_argument("--hessian", default="exact", choices=HESSIANS)
     ap.add_argument("--solver", default="ipopt", choices=SOLVERS)
-    ap.add_argument("--out", type=Path,
-                    default=ROOT / "studies" / "results" / "bench_scaling.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "bench_scaling.md")
+    add_smoke(ap)
     args = ap.parse_args()
-    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    if args.smoke:
+        args.sizes, args.simultaneous_only = [4], []
+        args.out = smoke_dir("bench_scaling") / "bench_scaling.md"
+    run = Run()
     rows = []
     methods = ((("sequential", "ipopt"), ("simultaneous", "ipopt")) if args.solver == "ipopt"
                else (("simultaneous", "ipopt"), ("simultaneous", args.solver)))
@@ -77,8 +77,10 @@ def main() -> None:
         limit = args.time_limit if n >= args.limit_from else None
         print(f"== {n}x{n} {label(tr, solver)} (time limit {limit}) ...", flush=True)
         try:
-            r = run_child(n, tr, time_limit=limit, stop_rms=args.stop_rms,
-                          target=args.target, hessian=args.hessian, solver=solver)
+            r = solve_in_child(args.target, n, {"layout": LAYOUT},
+                               {"transcription": tr, "time_limit": limit,
+                                "stop_rms": args.stop_rms, "hessian": args.hessian,
+                                "solver": solver})
         except RuntimeError as exc:  # the child failed outside the solver (see its stderr)
             rows.append(f"| {n}x{n} | {label(tr, solver)} | failed: "
                         f"{str(exc).splitlines()[-1][:200]} |")
@@ -93,9 +95,7 @@ def main() -> None:
     md = [
         "# Transcription scaling (`studies/bench_scaling.py`)",
         "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} CPUs; "
-        f"NumPy {np.__version__}, CasADi {ca.__version__}; load average (1 min) {load0:.1f} at "
-        f"start, {os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        f"- {run.header()}",
         f"- problem: targets/{args.target}.toml at n x n panels, stop_rms={args.stop_rms}, "
         f"the target file's other options, hessian={args.hessian!r} (IPOPT) "
         "(sequential: SX derivatives up to 12 x 12 panels, MX above; "
@@ -112,6 +112,7 @@ def main() -> None:
         *rows,
         "",
     ]
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(md))
     print("\n".join(md))
 

@@ -11,36 +11,38 @@ of designs per minute and the ratio, checks that both runs give the same table, 
 studies/results/bench_sweep.md.
 
     python studies/bench_sweep.py [--workers 2]
+    python studies/bench_sweep.py --smoke   (one design at 4 x 4 panels, 1 worker, temporary
+        output)
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import platform
 import resource
 import shutil
 import time
-from datetime import datetime
 from pathlib import Path
 
+from common import RESULTS, ROOT, Run, add_smoke, smoke_dir
 from rffqm_nlp import sweeps
 
-ROOT = Path(__file__).resolve().parent.parent
 RADII = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)
 HALF_SIDE = 1.6
+#: the solver of the recorded results: IPOPT, sequential transcription, to its tolerance
+#: (stop_rms unset)
+SOLVE = {"solver": "ipopt", "transcription": "sequential", "max_iter": 500}
 
 
-def study() -> sweeps.Study:
-    """The 32 designs: 8 radii (cases with their domains) x 2 layouts x 2 pattern sizes."""
+def study(radii=RADII, layouts=("zigzag_i", "zigzag_j"), panels=(6, 8)) -> sweeps.Study:
+    """The designs: radii (cases with their domains) x layouts x pattern sizes (32 by
+    default)."""
     cases = [{"name": f"R={R:g}", "target.radius": R,
-              "target.domain": [[-HALF_SIDE / R, HALF_SIDE / R]] * 2} for R in RADII]
-    return sweeps.Study(base={"target": {"name": "sphere_cap"},
-                             "design": {"stop_rms": None, "max_iter": 500,
-                                        "transcription": "sequential"}},
-                       parameters={"design.layout": ["zigzag_i", "zigzag_j"],
-                                   "design.panels": [6, 8]},
-                       cases=cases)
+              "target.domain": [[-HALF_SIDE / R, HALF_SIDE / R]] * 2} for R in radii]
+    return sweeps.Study(base={"target": {"name": "sphere_cap"}, "solve": dict(SOLVE)},
+                        parameters={"design.layout": list(layouts),
+                                    "design.panels": list(panels)},
+                        cases=cases)
 
 
 def machine_busy() -> float:
@@ -56,12 +58,12 @@ def own_cpu() -> float:
                for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
 
 
-def timed(scheduler: str, workers: int, out: Path) -> dict:
+def timed(the_study: sweeps.Study, scheduler: str, workers: int, out: Path) -> dict:
     """Wall time, cores used (own and whole machine) and table of the study run with
     ``scheduler`` into the emptied folder ``out``."""
     shutil.rmtree(out, ignore_errors=True)
     t0, cpu0, busy0 = time.perf_counter(), own_cpu(), machine_busy()
-    frame = sweeps.run(study(), out, scheduler=scheduler, workers=workers)
+    frame = sweeps.run(the_study, out, scheduler=scheduler, workers=workers)
     wall = time.perf_counter() - t0
     return {"wall": wall, "own": (own_cpu() - cpu0) / wall,
             "machine": (machine_busy() - busy0) / wall, "frame": frame}
@@ -70,14 +72,18 @@ def timed(scheduler: str, workers: int, out: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--results", type=Path, default=ROOT / "studies" / "results")
+    parser.add_argument("--results", type=Path, default=RESULTS)
+    add_smoke(parser)
     args = parser.parse_args()
-    n = len(study().designs())
-    load0 = os.getloadavg()[0]
-    runs = ROOT / "runs" / "bench_sweep"
-    serial = timed("none", 1, runs / "serial")
-    cluster = timed("local", args.workers, runs / "cluster")
-    load1 = os.getloadavg()[0]
+    the_study, runs = study(), ROOT / "runs" / "bench_sweep"
+    if args.smoke:
+        the_study = study(radii=RADII[:1], layouts=("zigzag_i",), panels=(4,))
+        args.workers, runs = 1, smoke_dir("bench_sweep")
+        args.results = runs / "results"
+    n = len(the_study.designs())
+    run = Run()
+    serial = timed(the_study, "none", 1, runs / "serial")
+    cluster = timed(the_study, "local", args.workers, runs / "cluster")
     a, b = serial["frame"], cluster["frame"]
     same = list(a["id"]) == list(b["id"]) and list(a["status"]) == list(b["status"])
     both = (a["status"] == "solved") & (b["status"] == "solved")
@@ -87,12 +93,11 @@ def main() -> None:
     rows = [("serial (scheduler none, this process)", serial, rate_s),
             (f"LocalCluster, {args.workers} workers x 1 thread", cluster, rate_c)]
     lines = ["# Sweep throughput (`studies/bench_sweep.py`)", "",
-             f"- date {datetime.now():%Y-%m-%dT%H:%M}; {platform.machine()}, {os.cpu_count()} "
-             f"CPUs; Python {platform.python_version()}; load average (1 min) {load0:.1f} "
-             f"at start, {load1:.1f} at end (it includes this run's own processes)",
-             f"- study: {n} designs, sphere caps of radius {', '.join(f'{r:g}' for r in RADII)} "
-             f"(patch side {2 * HALF_SIDE:g}) x layouts zigzag_i, zigzag_j x 6 x 6 and 8 x 8 "
-             "panels; stop_rms off, max_iter 500; each run from an empty output folder, "
+             f"- {run.header()} (the load includes this run's own processes)",
+             f"- study: {n} designs, sphere caps (patch side {2 * HALF_SIDE:g}): "
+             f"{', '.join(sorted({d.case for d in the_study.designs()}))} x "
+             "layouts x pattern sizes as in `study()`; IPOPT (sequential), stop_rms off, "
+             "max_iter 500; each run from an empty output folder, "
              "writing every result folder and the table after every design",
              "- wall time includes starting the cluster and its workers importing rffqm_nlp; "
              "per-design time = the design's own wall time where it ran (build + solve)",

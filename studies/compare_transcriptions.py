@@ -7,36 +7,35 @@ simultaneous time ratio.
 Writes studies/results/compare_transcriptions.md.
 
     python studies/compare_transcriptions.py [--sizes 8 12 16] [--time-limit 60]
+    python studies/compare_transcriptions.py --smoke   (the sphere cap at 4 x 4, one layout,
+        temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 from dataclasses import replace
 from pathlib import Path
 
-from rffqm_nlp.design import DesignProblem
+from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem
+from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.errors import RffqmError
 from rffqm_nlp.sweeps import one_thread
 
-ROOT = Path(__file__).resolve().parent.parent
-TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
 LAYOUTS = ("zigzag_i", "zigzag_j")
 TRANSCRIPTIONS = ("sequential", "simultaneous")
 
 
-def solve(prob: DesignProblem) -> dict:
+def solve(prob: DesignProblem, options: SolveOptions) -> dict:
     t0 = time.perf_counter()
     try:
-        res = prob.solve()
+        res = prob.solve(options)
     except RffqmError as exc:
         return {"status": type(exc).__name__ + ": " + str(exc).split(";")[0][:60],
                 "wall": time.perf_counter() - t0}
-    return {"status": res.stats["status"], "iterations": res.stats["iterations"],
-            "objective": res.stats["objective"], "rms": res.fit["rms"],
+    return {"status": res.stats.status, "iterations": res.stats.iterations,
+            "objective": res.stats.objective, "rms": res.fit.rms,
             "wall": time.perf_counter() - t0}
 
 
@@ -51,20 +50,24 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[8, 12, 16])
     ap.add_argument("--time-limit", type=float, default=60.0, help="IPOPT seconds per solve")
-    ap.add_argument("--out", type=Path,
-                    default=ROOT / "studies" / "results" / "compare_transcriptions.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "compare_transcriptions.md")
+    add_smoke(ap)
     args = ap.parse_args()
-    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    targets, layouts = TARGETS, LAYOUTS
+    if args.smoke:
+        args.sizes, targets, layouts = [4], TARGETS[:1], LAYOUTS[:1]
+        args.out = smoke_dir("compare_transcriptions") / "compare_transcriptions.md"
+    run = Run()
     rows = []
     with one_thread():  # CasADi's OpenBLAS under MUMPS included
-        for name in TARGETS:
+        for name in targets:
             for n in args.sizes:
-                for layout in LAYOUTS:
-                    prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
-                                   panels=(n, n), layout=layout, stop_rms=None,
-                                   time_limit=args.time_limit, hessian="exact",
-                                   solver="ipopt")
-                    seq, sim = (solve(replace(prob, transcription=tr)) for tr in TRANSCRIPTIONS)
+                for layout in layouts:
+                    prob, options = target_problem(name, n, layout=layout)
+                    options = replace(options, stop_rms=None, time_limit=args.time_limit,
+                                      hessian="exact", solver="ipopt")
+                    seq, sim = (solve(prob, replace(options, transcription=tr))
+                                for tr in TRANSCRIPTIONS)
                     ratio = (f"{seq['wall'] / sim['wall']:.1f}x"
                              if "objective" in seq and "objective" in sim else "-")
                     rows.append(f"| {name} | {n}x{n} | {layout} | {cell(seq)} | {cell(sim)} "
@@ -73,9 +76,7 @@ def main() -> None:
     header = [
         "# Sequential against simultaneous transcription (`studies/compare_transcriptions.py`)",
         "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} "
-        f"CPUs, one BLAS thread; load average (1 min) {load0:.1f} at start, "
-        f"{os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        f"- {run.header()}; one BLAS thread",
         f"- targets/*.toml at n x n panels, both layouts, stop_rms=None, default options, "
         f"IPOPT time limit {args.time_limit:g} s per solve; time = wall time of "
         "`DesignProblem.solve()` including the build; ratio = sequential time / simultaneous "
@@ -86,7 +87,10 @@ def main() -> None:
         "| sim. time [s] | ratio |",
         "|" + "---|" * 14,
     ]
-    args.out.write_text("\n".join(header + rows) + "\n")
+    text = "\n".join(header + rows) + "\n"
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(text)
     print(f"wrote {args.out}")
 
 

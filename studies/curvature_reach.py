@@ -15,15 +15,14 @@ per pattern size, with the best plane's RMS for comparison) and curvature_reach.
 per-design results go to --out (resumable: a second run only redoes missing designs).
 
     python studies/curvature_reach.py [--out runs/curvature_reach] [--scheduler local]
+    python studies/curvature_reach.py --smoke   (one radius at 4 x 4 panels, serial,
+        temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import platform
-import time
-from datetime import datetime
 from pathlib import Path
 
 import matplotlib
@@ -33,21 +32,22 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from common import RESULTS, ROOT, Run, add_smoke, smoke_dir  # noqa: E402
 from rffqm_nlp import surfaces, sweeps  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 SIDE = 4.0
 RADII = (1.5, 2.0, 3.0, 5.0)
 PANELS = [8, 12, 16]
-# the transcription of the recorded results (the package default is now simultaneous)
-BASE = {"design": {"stop_rms": None, "max_iter": 500, "transcription": "sequential"}}
+# the solver and transcription of the recorded results (IPOPT to its tolerance: stop_rms
+# unset; the package defaults are now Levenberg-Marquardt, simultaneous)
+BASE = {"solve": {"solver": "ipopt", "max_iter": 500, "transcription": "sequential"}}
 
 
-def cases() -> list[dict]:
+def cases(radii: tuple[float, ...] = RADII) -> list[dict]:
     """One [[sweep.cases]] entry per target: sphere caps and saddles of each radius."""
     half = SIDE / 2
     out = []
-    for R in RADII:
+    for R in radii:
         out.append({"name": f"sphere R={R:g}", "target.name": "sphere_cap",
                     "target.radius": R, "target.domain": [[-half / R, half / R]] * 2})
         out.append({"name": f"saddle R={R:g}", "target.name": "saddle", "target.a": R,
@@ -71,18 +71,18 @@ def plane_rms(target: dict) -> float:
     return float(smallest / math.sqrt(len(pts)) / surface.diameter())
 
 
-def figure(frame: pd.DataFrame, path: Path) -> None:
+def figure(frame: pd.DataFrame, path: Path, panels: list[int]) -> None:
     """K L^2 against the RMS fit: one line per pattern size, failures marked at the top."""
     fig, ax = plt.subplots(figsize=(8, 5))
     top = 1.3 * frame["plane"].max() * 100
-    for panels, group in frame.groupby("panels"):
+    for size, group in frame.groupby("panels"):
         group = group.sort_values("K L^2")
         for shape, part in group.groupby(group["K L^2"] > 0):
             solved = part[part["status"] == "solved"]
-            ax.plot(solved["K L^2"], 100 * solved["rms"], "o-", color=f"C{PANELS.index(panels)}",
-                    label=f"{panels} x {panels} panels" if shape else None)
+            ax.plot(solved["K L^2"], 100 * solved["rms"], "o-", color=f"C{panels.index(size)}",
+                    label=f"{size} x {size} panels" if shape else None)
             failed = part[part["status"] != "solved"]
-            ax.plot(failed["K L^2"], [top] * len(failed), "x", color=f"C{PANELS.index(panels)}",
+            ax.plot(failed["K L^2"], [top] * len(failed), "x", color=f"C{panels.index(size)}",
                     markersize=9)
     plane = frame.drop_duplicates("case").sort_values("K L^2")
     for shape, part in plane.groupby(plane["K L^2"] > 0):
@@ -99,15 +99,15 @@ def figure(frame: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def markdown(frame: pd.DataFrame, header: list[str]) -> str:
+def markdown(frame: pd.DataFrame, header: list[str], panels: list[int]) -> str:
     """One line per target, one column per pattern size: RMS (or the status), iterations,
     time."""
     lines = header + ["", "| target | K L^2 | best plane RMS | "
-                      + " | ".join(f"{p} x {p}: RMS, it., time" for p in PANELS) + " |",
-                      "|---|---|---|" + "---|" * len(PANELS)]
+                      + " | ".join(f"{p} x {p}: RMS, it., time" for p in panels) + " |",
+                      "|---|---|---|" + "---|" * len(panels)]
     for case, group in frame.groupby("case", sort=False):
         cells = []
-        for p in PANELS:
+        for p in panels:
             row = group[group["panels"] == p].iloc[0]
             if row["status"] == "solved":
                 cells.append(f"{100 * row['rms']:.2f}% ({row['iterations']}, "
@@ -123,34 +123,38 @@ def markdown(frame: pd.DataFrame, header: list[str]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "runs" / "curvature_reach")
-    parser.add_argument("--results", type=Path, default=ROOT / "studies" / "results")
+    parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--scheduler", default="local", help="local, none or an address")
     parser.add_argument("--workers", type=int, default=2)
+    add_smoke(parser)
     args = parser.parse_args()
-    study = sweeps.Study(base=BASE, parameters={"design.panels": PANELS[::-1]}, cases=cases())
-    t0 = time.perf_counter()
+    panels, radii = PANELS, RADII
+    if args.smoke:
+        panels, radii, args.scheduler = [4], RADII[-1:], "none"
+        args.out = smoke_dir("curvature_reach")
+        args.results = args.out / "results"
+    study = sweeps.Study(base=BASE, parameters={"design.panels": panels[::-1]},
+                         cases=cases(radii))
+    run = Run()
     frame = sweeps.run(study, args.out, scheduler=args.scheduler, workers=args.workers)
-    elapsed = time.perf_counter() - t0
     frame["panels"] = frame["design.panels"].astype(int)
     frame["K L^2"] = frame.apply(curvature, axis=1)
     targets = {d.id: d.config["target"] for d in study.designs()}
     frame["plane"] = [plane_rms(targets[i]) for i in frame["id"]]
     args.results.mkdir(parents=True, exist_ok=True)
-    figure(frame, args.results / "curvature_reach.png")
+    figure(frame, args.results / "curvature_reach.png", panels)
     header = ["# Reachable Gaussian curvature (`studies/curvature_reach.py`)", "",
-              f"- date {datetime.now():%Y-%m-%dT%H:%M}; {platform.machine()}, "
-              f"Python {platform.python_version()}; {len(frame)} designs in {elapsed:.0f} s "
-              f"wall time (scheduler {args.scheduler}, {args.workers} workers; designs found "
-              "complete in --out are not re-timed)",
+              f"- {run.header()}; {len(frame)} designs (scheduler {args.scheduler}, "
+              f"{args.workers} workers; designs found complete in --out are not re-timed)",
               f"- targets: patches of side L = {SIDE:g}: sphere caps of radius R over angles "
               f"|u|, |v| <= {SIDE / 2:g}/R, saddles z = (u^2 - v^2)/(2R) over |u|, |v| <= "
               f"{SIDE / 2:g}; K L^2 at the centre = +-{SIDE ** 2:g}/R^2",
               "- design: defaults (layout zigzag_i, alpha0 1.1, omega0 2.0, min_length 0.2, "
-              "min_angle 0.15), stop_rms off, max_iter 500; RMS = distance "
+              "min_angle 0.15); IPOPT (sequential), stop_rms off, max_iter 500; RMS = distance "
               "to the target lattice / target diameter; time = wall time of the design on its "
               "worker (build + solve)",
               "- ![plot](curvature_reach.png)"]
-    text = markdown(frame, header)
+    text = markdown(frame, header, panels)
     (args.results / "curvature_reach.md").write_text(text)
     print(text)
 

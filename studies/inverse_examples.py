@@ -6,6 +6,7 @@ and end, RMS/diameter, Hausdorff/diameter, the best plane's RMS, smallest side/m
 sector angle, iterations and time.
 
     python studies/inverse_examples.py [--panels 20] [--out studies/results]
+    python studies/inverse_examples.py --smoke   (the sphere cap at 4 x 4, temporary output)
 """
 
 from __future__ import annotations
@@ -20,12 +21,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from common import RESULTS, TARGETS, add_smoke, smoke_dir, target_problem  # noqa: E402
 from rffqm_nlp import viz  # noqa: E402
 from rffqm_nlp.design import DesignProblem  # noqa: E402
 from rffqm_nlp.errors import RffqmError  # noqa: E402
-
-TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def figure(name: str, prob: DesignProblem, res, path: Path) -> None:
@@ -42,7 +41,7 @@ def figure(name: str, prob: DesignProblem, res, path: Path) -> None:
     ax.plot_surface(*(surf[..., k] for k in range(3)), color="0.85", alpha=0.3, linewidth=0)
     ax.plot_surface(*(Y[..., k] for k in range(3)), color="tab:orange", edgecolor="k",
                     linewidth=0.2, alpha=0.9)
-    ax.set_title(f"folded, omega = {res.omega:.3f}, RMS {100 * res.fit['rms']:.2f}% of diameter")
+    ax.set_title(f"folded, omega = {res.omega:.3f}, RMS {100 * res.fit.rms:.2f}% of diameter")
     for a in fig.axes:
         a.set_box_aspect((1, 1, 1))
         a.set_axis_off()
@@ -57,36 +56,38 @@ def figure(name: str, prob: DesignProblem, res, path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--panels", type=int, default=20, help="2N = 2M panels")
-    parser.add_argument("--out", type=Path, default=ROOT / "studies" / "results")
+    parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--targets", default=",".join(TARGETS))
     parser.add_argument("--full", action="store_true",
-                        help="run IPOPT to its tolerance (ignore the targets' stop_rms)")
+                        help="solve to the solver's tolerance (ignore the targets' stop_rms)")
+    add_smoke(parser)
     args = parser.parse_args()
+    if args.smoke:
+        args.panels, args.targets, args.out = 4, TARGETS[0], smoke_dir("inverse_examples")
     args.out.mkdir(parents=True, exist_ok=True)
     header = ("| target | panels | loss start | loss end | RMS/diam | Hausdorff/diam | plane RMS/diam "
               "| min side/mean | min angle | iterations | time (s) | status |")
     rows = [header, "|" + "---|" * 12]
     for name in args.targets.split(","):
-        prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
-                       panels=(args.panels, args.panels))
+        prob, options = target_problem(name, args.panels)
         if args.full:
-            prob = replace(prob, stop_rms=None)
+            options = replace(options, stop_rms=None)
         t0 = time.perf_counter()
         try:
-            res = prob.solve()
+            res = prob.solve(options)
         except RffqmError as exc:
             rows.append(f"| {name} | {args.panels} | | | | | | | | | "
                         f"{time.perf_counter() - t0:.1f} | {type(exc).__name__}: {exc} |")
             print(rows[-1], flush=True)
             continue
         elapsed = time.perf_counter() - t0
-        hist = res.stats["history"]["objective"]
+        hist = res.stats.history["objective"]
         fit = res.fit
-        rows.append(f"| {name} | {args.panels} | {hist[0]:.4g} | {res.stats['objective']:.4g} "
-                    f"| {100 * fit['rms']:.2f}% | {100 * fit['hausdorff']:.2f}% "
-                    f"| {100 * fit['plane_rms']:.2f}% | {fit['min_side_over_mean']:.3f} "
-                    f"| {fit['min_sector_angle']:.3f} | {res.stats['iterations']} "
-                    f"| {elapsed:.1f} | {res.stats['status']} |")
+        rows.append(f"| {name} | {args.panels} | {hist[0]:.4g} | {res.stats.objective:.4g} "
+                    f"| {100 * fit.rms:.2f}% | {100 * fit.hausdorff:.2f}% "
+                    f"| {100 * fit.plane_rms:.2f}% | {fit.min_side_over_mean:.3f} "
+                    f"| {fit.min_sector_angle:.3f} | {res.stats.iterations} "
+                    f"| {elapsed:.1f} | {res.stats.status} |")
         print(rows[-1], flush=True)
         figure(name, prob, res, args.out / f"inverse_{name}.png")
     table = "\n".join(rows)

@@ -14,38 +14,33 @@ options that avoid this, counting factorisations from IPOPT's own output. Each r
 fresh subprocess; stop_rms is the target file's (0.9%).
 
     python studies/ipopt_start.py [--sizes 20 40] [--out studies/results/ipopt_start.md]
+    python studies/ipopt_start.py --smoke   (the sphere cap at 4 x 4, temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import re
-import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import replace
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
+from common import (RESULTS, TARGETS, Run, add_smoke, run_child, smoke_dir, solve_in_child,
+                    target_problem)
+
 CONFIGS = {"IPOPT defaults": {}, "bound_mult_init_val 0.01": {"bound_mult_init_val": 0.01},
            "bound_mult_init_method mu-based": {"bound_mult_init_method": "mu-based"}}
 #: one row of IPOPT's iteration table: iter, objective, inf_pr, inf_du, lg(mu), ||d||, lg(rg)
 ITERATION = re.compile(r"^\s*(\d+)r?\s+\S+\s+\S+\s+\S+\s+\S+\s+\S+\s+(\S+)\s")
 
 
-def problem(name: str, n: int, options: dict):
-    import rffqm_nlp as rq
-
-    return replace(rq.DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
-                   hessian="exact", solver="ipopt", ipopt_options=options)
+#: the solve options of every run but its ipopt_options
+SOLVE = {"hessian": "exact", "solver": "ipopt"}
 
 
 def initial_multipliers(name: str, n: int, config: str) -> dict:
@@ -55,12 +50,13 @@ def initial_multipliers(name: str, n: int, config: str) -> dict:
 
     from rffqm_nlp import transcription
 
-    prob = problem(name, n, CONFIGS[config])
-    nlp = prob.transcribe()
+    prob, options = target_problem(name, n)
+    options = replace(options, **SOLVE, ipopt_options=CONFIGS[config])
+    nlp = prob.transcribe(options=options)
     opts = {"ipopt.max_iter": 0, "ipopt.print_level": 0, "print_time": False,
             "ipopt.sb": "yes", "ipopt.mu_strategy": "adaptive",
             "hess_lag": transcription.lagrangian_hessian(nlp),
-            **{f"ipopt.{k}": v for k, v in prob.ipopt_options.items()}}
+            **{f"ipopt.{k}": v for k, v in options.ipopt_options.items()}}
     solver = ca.nlpsol("start", "ipopt", {"x": nlp.x, "f": nlp.objective, "g": nlp.g}, opts)
     sol = solver(x0=nlp.x0, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
     eq = nlp.lbg == nlp.ubg
@@ -73,20 +69,15 @@ def initial_multipliers(name: str, n: int, config: str) -> dict:
             "gradient": float(np.abs(lam).max())}
 
 
-def child(name: str, n: int, config: str) -> dict:
+def solve(name: str, n: int, config: str) -> dict:
+    """One design in a fresh subprocess, IPOPT's factorisations read from its log."""
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
-        prob = problem(name, n, {**CONFIGS[config], "output_file": str(log),
-                                 "file_print_level": 6})
-        t0 = time.perf_counter()
-        try:
-            res = prob.solve()
-            out = {"status": res.stats["status"], "iterations": res.stats["iterations"],
-                   "rms": res.fit["rms"]}
-        except Exception as exc:  # a failed run is a result here
-            out = {"status": type(exc).__name__, "iterations": None, "rms": None}
-        out["wall"] = time.perf_counter() - t0
-        text = log.read_text()
+        r = solve_in_child(name, n, solve={**SOLVE, "ipopt_options": {
+            **CONFIGS[config], "output_file": str(log), "file_print_level": 6}})
+        out = {"status": r["status"], "iterations": r["iterations"],
+               "rms": (r["fit"] or {}).get("rms"), "wall": r["wall"]}
+        text = log.read_text() if log.exists() else ""  # no IPOPT run, no log
     out["factorizations"] = sum(int(m) for m in re.findall(
         r"Number of trial factorizations performed: (\d+)", text))
     regularization = {int(m.group(1)): m.group(2) for line in text.splitlines()
@@ -98,26 +89,25 @@ def child(name: str, n: int, config: str) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="*", default=[20, 40])
-    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "ipopt_start.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "ipopt_start.md")
+    add_smoke(ap)
     args = ap.parse_args()
-    t0, load0 = time.perf_counter(), os.getloadavg()[0]
-
-    def run(*argv: str) -> dict:
-        proc = subprocess.run([sys.executable, __file__, *argv], capture_output=True,
-                              text=True, check=True, cwd=ROOT)
-        return json.loads(proc.stdout.strip().splitlines()[-1])
-
+    targets, configs = TARGETS, list(CONFIGS)
+    if args.smoke:
+        args.sizes, targets, configs = [4], TARGETS[:1], configs[:1]
+        args.out = smoke_dir("ipopt_start") / "ipopt_start.md"
+    run = Run()
     lam_rows = []
-    for name in TARGETS:
-        for config in CONFIGS:
-            r = run("--multipliers", name, str(args.sizes[0]), config)
+    for name in targets:
+        for config in configs:
+            r = run_child(__file__, "--multipliers", name, str(args.sizes[0]), config)
             lam_rows.append(f"| {name} | {config} | {r['ipopt']:.3g} | {r['gradient']:.3g} |")
             print(lam_rows[-1], flush=True)
     rows, totals = [], {}
     for n in args.sizes:
-        for name in TARGETS:
-            for config in CONFIGS:
-                r = run("--child", name, str(n), config)
+        for name in targets:
+            for config in configs:
+                r = solve(name, n, config)
                 rms = "-" if r["rms"] is None else f"{100 * r['rms']:.2f}%"
                 rows.append(f"| {n}x{n} | {name} | {config} | {r['iterations'] or '-'} | "
                             f"{r['factorizations']} | {r['first_regularization']} | "
@@ -131,9 +121,7 @@ def main() -> None:
                   for (n, config), (f, w) in totals.items()]
     text = "\n".join([
         "# IPOPT start options on the simultaneous NLP (`studies/ipopt_start.py`)", "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} "
-        f"CPUs; CasADi {ca.__version__}; load average (1 min) {load0:.1f} at start, "
-        f"{os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        f"- {run.header()}",
         "- problem: the bundled targets at n x n panels, their target files' options "
         "(stop_rms 0.9%), exact Hessian; `ipopt_options` as named, one fresh subprocess "
         "per run", "",
@@ -149,13 +137,13 @@ def main() -> None:
         "## Totals over the three targets", "",
         "| panels | options | factorisations | wall [s] | speed-up vs defaults |",
         "|---|---|---|---|---|", *total_rows, ""])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] in ("--child", "--multipliers"):
-        fn = child if sys.argv[1] == "--child" else initial_multipliers
-        print(json.dumps(fn(sys.argv[2], int(sys.argv[3]), sys.argv[4])))
+    if len(sys.argv) == 5 and sys.argv[1] == "--multipliers":
+        print(json.dumps(initial_multipliers(sys.argv[2], int(sys.argv[3]), sys.argv[4])))
     else:
         main()

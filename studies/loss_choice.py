@@ -12,12 +12,13 @@ PAPER_NOTES s.8), the paper's forms misfit (the mean square of the forms residua
 at start and end, iterations, time and IPOPT's status.
 
     python studies/loss_choice.py [--sizes 8 12] [--time-limit 60]
+    python studies/loss_choice.py --smoke   (the sphere cap at 4 x 4, two weight sets,
+        temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -25,13 +26,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem
 from rffqm_nlp import numpy_model, shape, transcription
 from rffqm_nlp.boundary import BoundaryData
 from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import RffqmError, SolverFailed
+from rffqm_nlp.results import SolveStats
 
-ROOT = Path(__file__).resolve().parent.parent
-TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
 LAYOUT = "zigzag_i"
 WEIGHTS = {
     "paper (forms only)": {"forms": 1.0, "position": 0.0, "regularization": 0.1},
@@ -79,40 +80,50 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[8, 12])
     ap.add_argument("--time-limit", type=float, default=60.0, help="IPOPT seconds per solve")
-    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "loss_choice.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "loss_choice.md")
+    add_smoke(ap)
     args = ap.parse_args()
-    T0, load0 = time.perf_counter(), os.getloadavg()[0]
+    targets, weights = TARGETS, WEIGHTS
+    if args.smoke:
+        args.sizes, targets = [4], TARGETS[:1]
+        weights = dict(list(WEIGHTS.items())[:2])
+        args.out = smoke_dir("loss_choice") / "loss_choice.md"
+    run = Run()
     rows = []
     summary = {}
     for n in args.sizes:
-        for name in TARGETS:
-            base = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"), panels=(n, n),
-                           layout=LAYOUT, stop_rms=None, time_limit=args.time_limit,
-                           transcription="sequential",  # measures() reads its x
-                           hessian="exact", solver="ipopt")
+        for name in targets:
+            base, options = target_problem(name, n, layout=LAYOUT)
+            options = replace(options, stop_rms=None, time_limit=args.time_limit,
+                              transcription="sequential",  # measures() reads its x
+                              hessian="exact", solver="ipopt")
             start = base.start()
-            x0 = base.transcribe(start).x0
+            x0 = base.transcribe(start, options=options).x0
             m0 = measures(base, start, x0)
-            for label, w in WEIGHTS.items():
+            for label, w in weights.items():
                 prob = replace(base, weights=w)
                 t0 = time.perf_counter()
                 try:
-                    res = prob.solve()
+                    res = prob.solve(options)
                     stats, x = res.stats, res.x
                 except SolverFailed as exc:
+                    if not isinstance(exc.stats, SolveStats):
+                        rows.append(f"| {name} | {n}x{n} | {label} | {exc.status}: {exc} |")
+                        print(rows[-1], flush=True)
+                        continue
                     stats, x = exc.stats, exc.last_iterate
                 except RffqmError as exc:
                     rows.append(f"| {name} | {n}x{n} | {label} | {type(exc).__name__}: {exc} |")
                     print(rows[-1], flush=True)
                     continue
                 wall = time.perf_counter() - t0
-                hist = stats["history"]["objective"]
+                hist = stats.history["objective"]
                 try:
                     m1 = measures(prob, start, np.asarray(x))
                 except RffqmError as exc:
                     m1 = dict.fromkeys(m0, np.nan)
                     print(f"  last iterate does not march: {exc}")
-                f0, f1 = hist[0], stats["objective"]
+                f0, f1 = hist[0], stats.objective
                 summary[(n, name, label)] = (m0, m1, f0, f1)
                 rows.append(
                     f"| {name} | {n}x{n} | {label} | {f0:.4g} | {f1:.4g} | "
@@ -120,20 +131,17 @@ def main() -> None:
                     f"**{100 * m1['rms']:.2f}%** | {100 * m1['rms_parity']:.2f}% | "
                     f"{100 * m1['rms_ring']:.2f}% | {100 * m1['rms_interior']:.2f}% | "
                     f"{m0['forms']:.3g} | {m1['forms']:.3g} ({100 * (m1['forms'] / m0['forms'] - 1):+.0f}%) | "
-                    f"{m1['roughness']:.3g} | {stats['iterations']} | {wall:.1f} | "
-                    f"{stats['status']} |")
+                    f"{m1['roughness']:.3g} | {stats.iterations} | {wall:.1f} | "
+                    f"{stats.status} |")
                 print(rows[-1], flush=True)
-    total = time.perf_counter() - T0
     md = [
         "# Loss choice (`studies/loss_choice.py`)",
         "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; load average (1 min) {load0:.1f} at "
-        f"start, {os.getloadavg()[0]:.1f} at end (the load includes this run's own process); "
-        f"whole run {total:.0f} s",
+        f"- {run.header()} (the load includes this run's own process)",
         f"- targets/*.toml, layout {LAYOUT}, stop_rms=None, IPOPT time limit "
         f"{args.time_limit:.0f} s, default constraints (min_length 0.2, min_angle 0.15, "
         "mu_margin 0.02), same Miura start for every weight set",
-        "- weights: " + "; ".join(f"{k}: {v}" for k, v in WEIGHTS.items()),
+        "- weights: " + "; ".join(f"{k}: {v}" for k, v in weights.items()),
         "- loss: 0.5 |residuals|^2 with that run's weights (incl. the Tikhonov term), so losses "
         "of different weight sets are not comparable with each other, only their reductions",
         "- RMS/diam: RMS distance of the coarse lattice r(i,j) = y^(2i)(2j), rigidly aligned "

@@ -9,12 +9,13 @@ per case from the layout's Miura start. Writes studies/results/min_length_cost.m
 and studies/results/min_length_cost.png.
 
     python studies/min_length_cost.py [--sizes 8 12] [--time-limit 60]
+    python studies/min_length_cost.py --smoke   (4 x 4, one layout, two bounds, temporary
+        output)
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -25,10 +26,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rffqm_nlp.design import DesignProblem  # noqa: E402
+from common import RESULTS, Run, add_smoke, smoke_dir, target_problem  # noqa: E402
 from rffqm_nlp.errors import InfeasibleDesign, SolverFailed  # noqa: E402
+from rffqm_nlp.results import SolveStats  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 LAYOUTS = ("zigzag_i", "zigzag_j")
 MIN_LENGTHS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
 
@@ -37,37 +38,44 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[8, 12])
     ap.add_argument("--time-limit", type=float, default=60.0, help="IPOPT seconds per solve")
-    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results")
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    add_smoke(ap)
     args = ap.parse_args()
-    T0, load0 = time.perf_counter(), os.getloadavg()[0]
-    base = replace(DesignProblem.load(ROOT / "targets" / "sphere_cap.toml"),
-                   stop_rms=None, time_limit=args.time_limit, transcription="sequential",
-                   hessian="exact", solver="ipopt")
-    rows, data = [], {}
-    for layout, n in [(lay, n) for lay in LAYOUTS for n in args.sizes]:
-        for ml in MIN_LENGTHS:
+    layouts, min_lengths = LAYOUTS, MIN_LENGTHS
+    if args.smoke:
+        args.sizes, layouts, min_lengths = [4], LAYOUTS[:1], (0.1, 0.2)
+        args.out = smoke_dir("min_length_cost")
+    run = Run()
+    base, options = target_problem("sphere_cap", args.sizes[0])
+    options = replace(options, stop_rms=None, time_limit=args.time_limit,
+                      transcription="sequential", hessian="exact", solver="ipopt")
+    rows, data, plane = [], {}, np.nan
+    for layout, n in [(lay, n) for lay in layouts for n in args.sizes]:
+        for ml in min_lengths:
             prob = replace(base, panels=(n, n), min_length=ml, layout=layout)
             t0 = time.perf_counter()
             entry = {"ml": ml, "rms": np.nan, "iters": np.nan}
             try:
-                res = prob.solve()
+                res = prob.solve(options)
                 f, st = res.fit, res.stats
-                entry.update(rms=f["rms"], iters=st["iterations"])
+                entry.update(rms=f.rms, iters=st.iterations)
+                plane = 100 * f.plane_rms
                 rows.append(
-                    f"| {layout} | {n}x{n} | {ml:.2f} | **{100 * f['rms']:.2f}%** | "
-                    f"{100 * f['rms_surface']:.2f}% | {100 * f['hausdorff']:.2f}% | "
-                    f"{f['min_side_over_mean']:.3f} | {f['min_sector_angle']:.3f} | "
-                    f"{st['history']['objective'][0]:.4g} | {st['objective']:.4g} | "
-                    f"{st['iterations']} | {time.perf_counter() - t0:.1f} | {st['status']} |")
+                    f"| {layout} | {n}x{n} | {ml:.2f} | **{100 * f.rms:.2f}%** | "
+                    f"{100 * f.rms_surface:.2f}% | {100 * f.hausdorff:.2f}% | "
+                    f"{f.min_side_over_mean:.3f} | {f.min_sector_angle:.3f} | "
+                    f"{st.history['objective'][0]:.4g} | {st.objective:.4g} | "
+                    f"{st.iterations} | {time.perf_counter() - t0:.1f} | {st.status} |")
             except (SolverFailed, InfeasibleDesign) as exc:
-                st = getattr(exc, "stats", None) or {}
-                entry.update(iters=st.get("iterations", np.nan))
+                st = getattr(exc, "stats", None)
+                iterations = st.iterations if isinstance(st, SolveStats) else None
+                entry.update(iters=np.nan if iterations is None else iterations)
                 rows.append(f"| {layout} | {n}x{n} | {ml:.2f} | - | - | - | - | - | - | - | "
-                            f"{st.get('iterations', '-')} | {time.perf_counter() - t0:.1f} | "
+                            f"{'-' if iterations is None else iterations} | "
+                            f"{time.perf_counter() - t0:.1f} | "
                             f"{type(exc).__name__}: {getattr(exc, 'status', '') or exc} |")
             data.setdefault((layout, n), []).append(entry)
             print(rows[-1], flush=True)
-    plane = 100 * res.fit["plane_rms"] if "res" in locals() else np.nan
     # plot
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for (layout, n), entries in data.items():
@@ -96,14 +104,11 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out / "min_length_cost.png", dpi=110)
     plt.close(fig)
-    total = time.perf_counter() - T0
     md = [
         "# Cost of the side-length constraint (`studies/min_length_cost.py`)",
         "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M:%S')}; load average (1 min) {load0:.1f} at "
-        f"start, {os.getloadavg()[0]:.1f} at end (the load includes this run's own process); whole "
-        f"run {total:.0f} s",
-        f"- targets/sphere_cap.toml, layouts {', '.join(LAYOUTS)}, stop_rms=None, default weights "
+        f"- {run.header()} (the load includes this run's own process)",
+        f"- targets/sphere_cap.toml, layouts {', '.join(layouts)}, stop_rms=None, default weights "
         f"{base.weights}, min_angle {base.min_angle}, mu_margin {base.mu_margin}; IPOPT "
         f"(sequential, exact Hessian) with a {args.time_limit:.0f} s limit; constraint: every "
         "side >= min_length x mean side (the package default is 0.2; 0.6-0.8 go beyond the "

@@ -14,33 +14,19 @@ The second table solves the 40 x 40 sphere cap with one and with two OpenBLAS th
 Each run is a fresh subprocess.
 
     python studies/solve_cost.py [--large 100] [--out studies/results/solve_cost.md]
-    python studies/solve_cost.py --child quarter_vase 200 simultaneous gauss-newton 1800
-        (one design; prints its row as JSON; the last number is the time limit in s;
-        the Hessian "levenberg-marquardt" stands for that solver)
+    python studies/solve_cost.py --smoke   (the sphere cap at 4 x 4 panels, temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import re
-import resource
-import subprocess
-import sys
 import tempfile
-import time
-from dataclasses import replace
 from pathlib import Path
 
-import casadi as ca
+from common import RESULTS, TARGETS, Run, add_smoke, fmt, smoke_dir, solve_in_child
+from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, SolveOptions
 
-from bench_inverse import fmt
-from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, DesignProblem
-
-ROOT = Path(__file__).resolve().parent.parent
-TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
 LM = "levenberg-marquardt"  # in the Hessian column: that solver (then IPOPT, exact, if needed)
 CONFIGS = {20: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"),
                 ("simultaneous", LM), ("sequential", "exact"), ("sequential", "gauss-newton")),
@@ -53,30 +39,26 @@ LARGE_TIME_LIMIT = 600.0
 TIMING = re.compile(r"^\s*(\w[\w ]*?)\.+:\s+[\d.]+ \(sys:\s+[\d.]+ wall:\s+([\d.]+)\)")
 
 
-def child(name: str, n: int, transcription: str, hessian: str,
-          time_limit: float | None = None) -> dict:
+def solve(name: str, n: int, transcription: str, hessian: str,
+          threads: int | None = None) -> dict:
+    """One design in a fresh subprocess, with IPOPT's timing statistics read from its log."""
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
-        solver = LM if hessian == LM else "ipopt"
-        prob = replace(DesignProblem.load(ROOT / "targets" / f"{name}.toml"),
-                       panels=(n, n), transcription=transcription, solver=solver,
-                       hessian="exact" if hessian == LM else hessian,
-                       time_limit=time_limit or TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
-                       ipopt_options={"output_file": str(log), "file_print_level": 6,
-                                      "file_append": "yes",  # both runs of a handover
-                                      "print_timing_statistics": "yes"})
-        t0 = time.perf_counter()
-        try:
-            res = prob.solve()
-            out = {"status": res.stats["status"], "iterations": res.stats["iterations"],
-                   "build": res.stats["build_time"], "rms": res.fit["rms"],
-                   "min_side": res.fit["min_side_over_mean"],
-                   "gauss_newton": res.stats["gauss_newton_iterations"]}
-        except Exception as exc:  # a failed run is a result here
-            out = {"status": type(exc).__name__, "iterations": None, "build": None,
-                   "rms": None, "min_side": None, "gauss_newton": None}
-        out["wall"] = time.perf_counter() - t0
+        options = {"transcription": transcription, "solver": LM if hessian == LM else "ipopt",
+                   "hessian": "exact" if hessian == LM else hessian,
+                   "time_limit": TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
+                   "ipopt_options": {"output_file": str(log), "file_print_level": 6,
+                                     "file_append": "yes",  # both runs of a handover
+                                     "print_timing_statistics": "yes"}}
+        env = None if threads is None else {"OPENBLAS_NUM_THREADS": str(threads)}
+        r = solve_in_child(name, n, solve=options, env=env)
         text = log.read_text() if log.exists() else ""  # no IPOPT run, no log
+    fit = r["fit"] or {}
+    out = {"status": r["status"], "iterations": r["iterations"], "build": r.get("build_time"),
+           "rms": fit.get("rms"), "min_side": fit.get("min_side_over_mean"),
+           "gauss_newton": r.get("gauss_newton_iterations"), "wall": r["wall"],
+           "cpu_user": r["cpu_user"], "cpu_sys": r["cpu_sys"],
+           "peak_gb": r["peak_rss_mb"] / 1024}
     timing: dict[str, float] = {}
     for m in filter(None, map(TIMING.match, text.splitlines())):
         timing[m.group(1)] = timing.get(m.group(1), 0.0) + float(m.group(2))
@@ -84,35 +66,29 @@ def child(name: str, n: int, transcription: str, hessian: str,
     out["functions"] = timing.get("Function Evaluations")
     out["factorizations"] = sum(int(m) for m in re.findall(
         r"Number of trial factorizations performed: (\d+)", text))
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    out["cpu_user"], out["cpu_sys"] = usage.ru_utime, usage.ru_stime
-    out["peak_gb"] = usage.ru_maxrss / 2 ** 20  # kB on Linux
     return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "studies" / "results" / "solve_cost.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "solve_cost.md")
     ap.add_argument("--large", type=int, nargs="*", default=[],
                     help="also these n x n sizes, simultaneous transcription, every solver "
                          f"({LARGE_TIME_LIMIT:.0f} s limit each)")
+    add_smoke(ap)
     args = ap.parse_args()
-    t0, load0 = time.perf_counter(), os.getloadavg()[0]
-
-    def run(*argv: str, threads: int | None = None) -> dict:
-        env = dict(os.environ)
-        if threads is not None:
-            env["OPENBLAS_NUM_THREADS"] = str(threads)
-        proc = subprocess.run([sys.executable, __file__, "--child", *argv], capture_output=True,
-                              text=True, check=True, cwd=ROOT, env=env)
-        return json.loads(proc.stdout.strip().splitlines()[-1])
-
-    rows, totals = [], {}
+    run = Run()
     sizes = {**CONFIGS, **{n: CONFIGS[40] for n in args.large}}
+    targets, thread_size, thread_counts = TARGETS, 40, (1, 2)
+    if args.smoke:
+        sizes = {4: (("simultaneous", "exact"),)}
+        targets, thread_size, thread_counts = TARGETS[:1], 4, (1,)
+        args.out = smoke_dir("solve_cost") / "solve_cost.md"
+    rows, totals = [], {}
     for n, configs in sizes.items():
-        for name in TARGETS:
+        for name in targets:
             for transcription, hessian in configs:
-                r = run(name, str(n), transcription, hessian)
+                r = solve(name, n, transcription, hessian)
                 rms = "-" if r["rms"] is None else f"{100 * r['rms']:.2f}%"
                 its = "-" if r["iterations"] is None else (
                     f"{r['iterations']}" + (f" ({r['gauss_newton']} GN)"
@@ -128,20 +104,18 @@ def main() -> None:
                   f"{sum(totals[(n, 'simultaneous', 'exact')]) / sum(w):.2f}x |"
                   for (n, t, h), w in totals.items()]
     thread_rows = []
-    for threads in (1, 2):
-        r = run("sphere_cap", "40", "simultaneous", "exact", threads=threads)
+    for threads in thread_counts:
+        r = solve("sphere_cap", thread_size, "simultaneous", "exact", threads=threads)
         thread_rows.append(f"| {threads} | {r['iterations'] or '-'} | {r['wall']:.1f} | "
                            f"{fmt(r['linear'], '.1f')} | {r['cpu_user']:.1f} | "
                            f"{r['cpu_sys']:.1f} | {r['status']} |")
         print(thread_rows[-1], flush=True)
     text = "\n".join([
         "# Where a design's time goes (`studies/solve_cost.py`)", "",
-        f"- date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, {os.cpu_count()} "
-        f"CPUs; CasADi {ca.__version__}; load average (1 min) {load0:.1f} at start, "
-        f"{os.getloadavg()[0]:.1f} at end; whole run {time.perf_counter() - t0:.0f} s",
+        f"- {run.header()}",
         "- problem: the bundled targets, their target files' options (stop_rms 0.9%), "
         f"time limit {TIME_LIMIT[20]:.0f} s ({LARGE_TIME_LIMIT:.0f} s above 40 x 40 "
-        f"panels); Gauss-Newton damping {DesignProblem.damping} "
+        f"panels); Gauss-Newton damping {SolveOptions.damping} "
         f"for at most {GAUSS_NEWTON_ITERATIONS} iterations, then exact; one fresh "
         "subprocess per run", "",
         "## Transcription, solver and Hessian", "",
@@ -156,17 +130,15 @@ def main() -> None:
         "min side/mean |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
         "| panels | transcription | Hessian | wall over the three targets [s] | speed-up vs "
         "simultaneous, exact |", "|---|---|---|---|---|", *total_rows, "",
-        "## OpenBLAS threads, 40x40 sphere cap (simultaneous, exact)", "",
+        f"## OpenBLAS threads, {thread_size}x{thread_size} sphere cap (simultaneous, exact)",
+        "",
         "CPU: user and system seconds of the whole subprocess", "",
         "| threads | iterations | wall [s] | linear solves [s] | CPU user [s] | "
         "CPU system [s] | status |", "|---|---|---|---|---|---|---|", *thread_rows, ""])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)
 
 
 if __name__ == "__main__":
-    if len(sys.argv) in (6, 7) and sys.argv[1] == "--child":
-        print(json.dumps(child(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5],
-                               *map(float, sys.argv[6:]))))
-    else:
-        main()
+    main()

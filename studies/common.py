@@ -1,0 +1,156 @@
+"""What the studies share: the bundled target problems, one design solved in a child process
+(its time and peak memory its own), the machine/date line of the tables, the table cell
+formatter and the ``--smoke`` run (tiny sizes, output to a temporary folder).
+
+A study imports it as ``from common import ...`` (the studies folder is the script's path).
+``python studies/common.py --child '<json>'`` solves one design and prints its row as JSON
+(:func:`solve_in_child` runs it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from rffqm_nlp.design import DesignProblem, SolveOptions, load_design
+from rffqm_nlp.errors import RffqmError, SolverFailed
+from rffqm_nlp.results import SolveStats
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "studies" / "results"
+#: the bundled target files, targets/<name>.toml
+TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
+
+
+# ------------------------------------------------------------------ problems
+def target_problem(name: str, n: int, **design: Any) -> tuple[DesignProblem, SolveOptions]:
+    """targets/<name>.toml at n x n panels, its [design] keys overridden by ``design``: the
+    problem and the file's solve options."""
+    problem, options = load_design(ROOT / "targets" / f"{name}.toml")
+    return replace(problem, panels=(n, n), **design), options
+
+
+# ------------------------------------------------------------------ child processes
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process in MB (VmHWM; unlike ru_maxrss it is not
+    inherited from the forking parent)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def run_child(script: str | Path, *argv: str, env: dict[str, str] | None = None) -> dict:
+    """Run ``python script *argv`` from the repository root and return the JSON of its last
+    line of output; RuntimeError with the end of its stderr when it fails."""
+    cmd = [sys.executable, str(script), *argv]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT,
+                          env=None if env is None else {**os.environ, **env})
+    if proc.returncode:
+        raise RuntimeError(f"child {cmd} failed:\n{proc.stderr[-3000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def solve_design(target: str, n: int, design: dict | None = None,
+                 solve: dict | None = None) -> dict:
+    """Solve targets/<target>.toml at n x n panels with its [design] and [solve] tables
+    overridden by ``design`` and ``solve``; a JSON-ready row: the statistics (``history``:
+    the iteration log), ``fit`` (None when the solve failed), ``x`` (the answer, or the
+    last iterate of a failed solve, or None), ``wall``/``cpu`` seconds of the solve, and
+    peak memory (``rss0_mb`` after the imports, ``peak_rss_mb`` at the end)."""
+    rss0 = peak_rss_mb()
+    problem, options = target_problem(target, n, **(design or {}))
+    options = replace(options, **(solve or {}))
+    row: dict[str, Any] = {"n": n, "target": target, "transcription": options.transcription,
+                           "solver": options.solver, "hessian": options.hessian,
+                           "fit": None, "x": None, "error": None}
+    t0, c0 = time.perf_counter(), time.process_time()
+    stats = None
+    try:
+        res = problem.solve(options)
+        stats, x = res.stats, res.x
+        row.update(fit=res.fit.to_dict())
+    except SolverFailed as exc:
+        stats = exc.stats if isinstance(exc.stats, SolveStats) else None
+        x = exc.last_iterate
+        row.update(error=str(exc), status=exc.status)
+    except RffqmError as exc:  # a failed run is a result here
+        x = None
+        row.update(error=str(exc), status=type(exc).__name__)
+    row["wall"] = time.perf_counter() - t0
+    row["cpu"] = time.process_time() - c0
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    row.update(cpu_user=usage.ru_utime, cpu_sys=usage.ru_stime, rss0_mb=rss0,
+               peak_rss_mb=peak_rss_mb(), success=row["fit"] is not None)
+    if stats is not None:
+        row.update({k: v for k, v in stats.to_dict().items() if k != "multistart"})
+    row.setdefault("iterations", None)
+    row.setdefault("history", {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
+    row["x"] = None if x is None else np.asarray(x, dtype=float).tolist()
+    return row
+
+
+def solve_in_child(target: str, n: int, design: dict | None = None, solve: dict | None = None,
+                   env: dict[str, str] | None = None) -> dict:
+    """:func:`solve_design` in a fresh Python process (``env``: extra environment)."""
+    args = json.dumps({"target": target, "n": n, "design": design, "solve": solve})
+    return run_child(__file__, "--child", args, env=env)
+
+
+# ------------------------------------------------------------------ tables
+@dataclass
+class Run:
+    """A study run's clock and load, for the machine/date line of its table."""
+
+    t0: float = field(default_factory=time.perf_counter)
+    load0: float = field(default_factory=lambda: os.getloadavg()[0])
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def header(self) -> str:
+        """date; machine; versions; load at start and now; seconds since the start."""
+        return (f"date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, "
+                f"{os.cpu_count()} CPUs; Python {platform.python_version()}, NumPy "
+                f"{np.__version__}, CasADi {ca.__version__}; load average (1 min) "
+                f"{self.load0:.1f} at start, {os.getloadavg()[0]:.1f} at end; whole run "
+                f"{self.elapsed():.0f} s")
+
+
+def fmt(value: float | None, spec: str = ".3g", none: str = "-") -> str:
+    """A table cell: ``value`` formatted with ``spec``, or ``none`` for None."""
+    return none if value is None else format(value, spec)
+
+
+# ------------------------------------------------------------------ smoke runs
+def add_smoke(parser: argparse.ArgumentParser) -> None:
+    """The ``--smoke`` flag: tiny sizes, one repetition, output to a temporary folder."""
+    parser.add_argument("--smoke", action="store_true",
+                        help="a quick check that the study runs: smallest sizes, one "
+                             "repetition, output to a temporary folder (studies/results "
+                             "is left alone)")
+
+
+def smoke_dir(study: str) -> Path:
+    """A fresh temporary folder for a smoke run's output."""
+    return Path(tempfile.mkdtemp(prefix=f"rffqm-smoke-{study}-"))
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        print(json.dumps(solve_design(**json.loads(sys.argv[2]))))
+    else:
+        sys.exit("usage: python studies/common.py --child '<json>' (see solve_in_child)")
