@@ -21,7 +21,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from common import RESULTS, TARGETS, add_smoke, smoke_dir, target_problem  # noqa: E402
+from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem  # noqa: E402
 from rffqm_nlp import viz  # noqa: E402
 from rffqm_nlp.design import DesignProblem  # noqa: E402
 from rffqm_nlp.errors import RffqmError  # noqa: E402
@@ -64,6 +64,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.smoke:
         args.panels, args.targets, args.out = 4, TARGETS[0], smoke_dir("inverse_examples")
+    run = Run()
     args.out.mkdir(parents=True, exist_ok=True)
     header = ("| target | panels | loss start | loss end | RMS/diam | Hausdorff/diam | plane RMS/diam "
               "| min side/mean | min angle | iterations | time (s) | status |")
@@ -90,7 +91,7 @@ def main() -> None:
                     f"| {elapsed:.1f} | {res.stats.status} |")
         print(rows[-1], flush=True)
         figure(name, prob, res, args.out / f"inverse_{name}.png")
-    table = "\n".join(rows)
+    table = "\n".join([f"- {run.header()}", "", *rows])
     (args.out / f"inverse_examples_{args.panels}.md").write_text(table + "\n")
     print(table)
 
