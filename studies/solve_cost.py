@@ -15,12 +15,17 @@ Each run is a fresh subprocess.
 
     python studies/solve_cost.py [--large 100] [--out studies/results/solve_cost.md]
     python studies/solve_cost.py --smoke   (the sphere cap at 4 x 4 panels, temporary output)
+    python studies/solve_cost.py --child quarter_vase 200 simultaneous gauss-newton 1800
+        (one design; prints its row as JSON; the last number is the time limit in s;
+        the Hessian "levenberg-marquardt" stands for that solver)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
+import sys
 import tempfile
 from pathlib import Path
 
@@ -40,13 +45,14 @@ TIMING = re.compile(r"^\s*(\w[\w ]*?)\.+:\s+[\d.]+ \(sys:\s+[\d.]+ wall:\s+([\d.
 
 
 def solve(name: str, n: int, transcription: str, hessian: str,
-          threads: int | None = None) -> dict:
-    """One design in a fresh subprocess, with IPOPT's timing statistics read from its log."""
+          time_limit: float | None = None, threads: int | None = None) -> dict:
+    """One design in a fresh subprocess, with IPOPT's timing statistics read from its log
+    (``time_limit``: seconds, by default :data:`TIME_LIMIT` of the size)."""
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
         options = {"transcription": transcription, "solver": LM if hessian == LM else "ipopt",
                    "hessian": "exact" if hessian == LM else hessian,
-                   "time_limit": TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
+                   "time_limit": time_limit or TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
                    "ipopt_options": {"output_file": str(log), "file_print_level": 6,
                                      "file_append": "yes",  # both runs of a handover
                                      "print_timing_statistics": "yes"}}
@@ -141,4 +147,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if len(sys.argv) in (6, 7) and sys.argv[1] == "--child":
+        print(json.dumps(solve(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5],
+                               *map(float, sys.argv[6:]))))
+    else:
+        main()
