@@ -15,8 +15,8 @@ from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingEr
                      RffqmError, SolverFailed, SurfaceError)
 from .pattern import Pattern
 from .marching import fold, march
-from .design import DesignProblem
-from .results import DesignResult
+from .design import DesignProblem, SolveOptions, load_design
+from .results import DesignResult, Fit, SolveStats
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
                "shape", "design", "transcription", "results", "files", "foldfile", "export",
@@ -31,7 +31,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
 
 
-__all__ = ["BoundaryData", "BoundaryDataError", "DesignProblem", "DesignResult",
+__all__ = ["BoundaryData", "BoundaryDataError", "DesignProblem", "DesignResult", "Fit",
            "InfeasibleDesign", "InputError", "MarchingError", "Pattern", "RffqmError",
-           "SolverFailed", "SurfaceError", "fold", "march", "miura_boundary", "perturb_angles",
-           "sweep", *_SUBMODULES]
+           "SolveOptions", "SolveStats", "SolverFailed", "SurfaceError", "fold", "load_design",
+           "march", "miura_boundary", "perturb_angles", "sweep", *_SUBMODULES]

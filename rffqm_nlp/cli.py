@@ -38,7 +38,7 @@ from .files import check_out_dir, jsonable, replace_folder, write_json
 from .pattern import check_omega
 
 if TYPE_CHECKING:
-    from .design import DesignProblem
+    from .design import DesignProblem, SolveOptions
     from .results import DesignResult
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode="markdown",
@@ -187,8 +187,9 @@ def _check_frames(frames: int) -> None:
 # --------------------------------------------------------------------------- design
 @app.command(cls=_PanelsCommand)
 def design(
-    target: Path = typer.Argument(..., help="Design file (TOML) with [target] and [design] "
-                                  "tables, e.g. targets/sphere_cap.toml.", show_default=False),
+    target: Path = typer.Argument(..., help="Design file (TOML) with [target], [design] "
+                                  "and [solve] tables, e.g. targets/sphere_cap.toml.",
+                                  show_default=False),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder (must be new or empty "
                              "unless --force, which replaces it whole).", show_default=False),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No live progress display."),
@@ -204,47 +205,44 @@ def design(
 ) -> None:
     """Design a crease pattern that folds into the target surface of TARGET.
 
-    Solves the inverse problem with the file's solver, IPOPT or Levenberg-Marquardt on the
-    marching manifold (live progress: iteration, objective, constraint violation, elapsed
-    time), prints the fit, and writes into OUT: result.json (the saved
+    Solves the inverse problem with the file's [solve] options (Levenberg-Marquardt on the
+    marching manifold by default, or IPOPT; live progress: iteration, objective, constraint
+    violation, elapsed time), prints the fit, and writes into OUT: result.json (the saved
     result), pattern.fold (24 states from flat to the designed omega), crease.svg/.pdf/.dxf,
     folded.obj/.glb, render.png and folding.gif (when off-screen rendering works) and
     convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
     (x_a^11 = 0); result.json also holds the folded state aligned onto the target.
     """
-    from .design import DesignProblem
+    from .design import load_design
 
     with user_errors():
-        problem = DesignProblem.load(target)
-        changes: dict = {}
+        problem, options = load_design(target)
         if panels is not None:
-            changes["panels"] = _parse_panels(panels)
+            problem = dataclasses.replace(problem, panels=_parse_panels(panels))
         if max_iter is not None:
-            changes["max_iter"] = max_iter
-        if changes:
-            problem = dataclasses.replace(problem, **changes)
+            options = dataclasses.replace(options, max_iter=max_iter)
         check_out_dir(out, force)          # before the solve: never waste a long solve
-        result = _solve(problem, quiet)
+        result = _solve(problem, options, quiet)
         with replace_folder(out) as tmp:
             _write_design(tmp, result, problem)
     Console().print(_summary(result, out))
 
 
-#: progress label of each DesignProblem.solver
+#: progress label of each SolveOptions.solver
 SOLVER_NAMES = {"ipopt": "IPOPT", "levenberg-marquardt": "Levenberg-Marquardt"}
 
 
-def _solve(problem: "DesignProblem", quiet: bool) -> "DesignResult":
+def _solve(problem: "DesignProblem", options: "SolveOptions", quiet: bool) -> "DesignResult":
     """Solve, with a live progress display unless ``quiet`` (on a terminal; elsewhere, as
     in a log file, a plain line every few seconds)."""
     if quiet:
-        return problem.solve()
+        return problem.solve(options)
     if not console.is_terminal:
-        return _solve_logged(problem)
+        return _solve_logged(problem, options)
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     columns = (SpinnerColumn(), TextColumn("[bold]{task.description}"),
-               TextColumn("iteration {task.fields[iter]:>5} / " + str(problem.max_iter)),
+               TextColumn("iteration {task.fields[iter]:>5} / " + str(options.max_iter)),
                TextColumn("objective {task.fields[objective]:>10}"),
                TextColumn("violation {task.fields[inf_pr]:>9}"), TimeElapsedColumn())
     N, M = problem.panels
@@ -253,25 +251,26 @@ def _solve(problem: "DesignProblem", quiet: bool) -> "DesignResult":
                                  inf_pr="-")
 
         def update(entry: dict) -> None:
-            progress.update(task, description=SOLVER_NAMES[problem.solver], iter=entry["iter"],
+            progress.update(task, description=SOLVER_NAMES[options.solver], iter=entry["iter"],
                             objective=f"{entry['objective']:.4e}",
                             inf_pr=f"{entry['inf_pr']:.2e}")
 
-        return problem.solve(callback=update)
+        return problem.solve(options, callback=update)
 
 
-def _solve_logged(problem: "DesignProblem", every: float = 10.0) -> "DesignResult":
+def _solve_logged(problem: "DesignProblem", options: "SolveOptions",
+                  every: float = 10.0) -> "DesignResult":
     """Solve, printing one progress line at most every ``every`` seconds."""
     last = [-every]
 
     def update(entry: dict) -> None:
         if entry["elapsed"] - last[0] >= every:
             last[0] = entry["elapsed"]
-            console.print(f"{SOLVER_NAMES[problem.solver]} iteration {entry['iter']}: objective "
+            console.print(f"{SOLVER_NAMES[options.solver]} iteration {entry['iter']}: objective "
                           f"{entry['objective']:.4e}, violation {entry['inf_pr']:.2e}, "
                           f"{entry['elapsed']:.0f} s", highlight=False)
 
-    return problem.solve(callback=update)
+    return problem.solve(options, callback=update)
 
 
 def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem") -> None:
@@ -283,7 +282,7 @@ def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem"
     options = _export_options(result)
     for fmt in DESIGN_FORMATS:
         EXPORTERS[fmt].write(folder / EXPORTERS[fmt].filename, pat, omega, **options)
-    viz.plot_convergence(result.stats["history"], folder / "convergence.png")
+    viz.plot_convergence(result.stats.history, folder / "convergence.png")
     ok, reason = viz.rendering_available()
     if ok:
         _render_files(folder, result, omega, FRAMES, target=problem.target)
@@ -303,18 +302,18 @@ def quantity_table(title: str, rows: list[tuple[str, str]]) -> Table:
 
 def _summary(result: "DesignResult", out: Path) -> Table:
     fit, stats = result.fit, result.stats
-    total = float(stats.get("build_time", 0.0)) + float(stats.get("solve_time", 0.0))
     return quantity_table(f"design: {result.pattern.N} x {result.pattern.M} panels", [
-        ("fit RMS to the target lattice (/ diameter)", f"{fit['rms']:.3e}"),
-        ("fit RMS to the target surface (/ diameter)", f"{fit['rms_surface']:.3e}"),
-        ("Hausdorff distance (/ diameter)", f"{fit['hausdorff']:.3e}"),
-        ("best plane RMS, for comparison (/ diameter)", f"{fit['plane_rms']:.3e}"),
-        ("smallest side / mean side", f"{fit['min_side_over_mean']:.4g}"),
-        ("smallest sector angle (rad)", f"{fit['min_sector_angle']:.4g}"),
+        ("fit RMS to the target lattice (/ diameter)", f"{fit.rms:.3e}"),
+        ("fit RMS to the target surface (/ diameter)", f"{fit.rms_surface:.3e}"),
+        ("Hausdorff distance (/ diameter)", f"{fit.hausdorff:.3e}"),
+        ("best plane RMS, for comparison (/ diameter)", f"{fit.plane_rms:.3e}"),
+        ("smallest side / mean side", f"{fit.min_side_over_mean:.4g}"),
+        ("smallest sector angle (rad)", f"{fit.min_sector_angle:.4g}"),
         ("designed omega (rad)", f"{result.omega:.6g}"),
-        ("iterations", str(stats.get("iterations", "?"))),
-        ("time (s)", f"{total:.1f} (build {stats.get('build_time', 0.0):.1f})"),
-        ("status", str(stats.get("status", "?"))),
+        ("iterations", str(stats.iterations)),
+        ("time (s)", f"{stats.build_time + stats.solve_time:.1f} "
+                     f"(build {stats.build_time:.1f})"),
+        ("status", stats.status),
         ("output", str(out))])
 
 

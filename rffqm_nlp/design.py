@@ -1,18 +1,23 @@
-"""Inverse design (the paper's section "Discussion on the inverse problem", PAPER_NOTES s.8).
+"""Inverse design (the paper's section "Discussion on the inverse problem", docs/paper.md).
 
-:class:`DesignProblem` states the problem declaratively: a target surface, a 2N x 2M
-pattern whose coarse lattice r(i, j) = y^{(2i)(2j)} should match the target lattice, the
-Miura mountain-valley assignment held fixed, the inline manufacturability constraints and the
-loss. :meth:`DesignProblem.solve` transcribes it (:mod:`rffqm_nlp.transcription`), solves one
-IPOPT NLP with exact derivatives (or, with ``solver="levenberg-marquardt"``, first marches
-the design's least squares with :mod:`rffqm_nlp.reduced`), re-marches the answer with the
-independent NumPy model and returns a :class:`~rffqm_nlp.results.DesignResult`.
+:class:`DesignProblem` states what is designed: a target surface, a 2N x 2M pattern whose
+coarse lattice r(i, j) = y^{(2i)(2j)} should match the target lattice, the Miura
+mountain-valley assignment held fixed, the inline manufacturability constraints and the loss.
+:class:`SolveOptions` states how: the solver, the transcription, IPOPT's Hessian and the
+limits. :meth:`DesignProblem.solve` transcribes the problem
+(:mod:`rffqm_nlp.transcription`), runs Levenberg-Marquardt on the marching manifold
+(:mod:`rffqm_nlp.reduced`) and/or IPOPT, re-marches the answer with the independent NumPy
+model and returns a :class:`~rffqm_nlp.results.DesignResult`. A design file has the tables
+[target], [design] and [solve] (:func:`load_design`). Measurements of the solvers and
+options: docs/solvers.md.
 """
 
 from __future__ import annotations
 
+import difflib
+import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -24,34 +29,36 @@ from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
 from .files import read_toml
-from .results import DesignResult
+from .results import DesignResult, Fit, SolveStats
 
 PI = np.pi
 DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1, "smoothness": 0.0}
 TRANSCRIPTIONS = ("sequential", "simultaneous")
-SOLVERS = ("ipopt", "levenberg-marquardt")
+LM = "levenberg-marquardt"
+SOLVERS = ("ipopt", LM)
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
-#: IPOPT options that a DesignProblem field (or solve's ``verbose``) sets, and that field.
+#: The tables of a design file.
+TABLES = ("target", "design", "solve")
+#: IPOPT options that a SolveOptions field (or solve's ``verbose``) sets, and that field.
 IPOPT_FIELDS = {"max_iter": "max_iter", "tol": "tol", "max_wall_time": "time_limit",
                 "hessian_approximation": "hessian", "print_level": "solve(verbose=...)"}
-#: Largest sequential pattern (panels) whose NLP is expanded to SX; see DesignProblem._expand.
+#: Largest sequential pattern (panels) whose NLP is expanded to SX; see SolveOptions.expand.
 SX_MAX_PANELS = 144
-#: IPOPT's barrier from a cold start. The loss is O(0.1) against hundreds of log-barrier
-#: terms, so IPOPT's default (monotone from mu = 0.1) first solves a different problem
-#: (angles near pi/2, sides ~8x the spacing): the simultaneous transcription loses
-#: feasibility there and never recovers, the sequential one needs 1.5-3x the iterations.
-#: Measured at 8 x 8 and 20 x 20 on the bundled targets: "adaptive" is fastest for the
-#: simultaneous NLP (20-36 iterations); for the sequential one it is also fast but found a
-#: worse local minimum of the 8 x 8 sphere cap, which mu_init = 1e-3 does not.
+#: IPOPT's barrier from a cold start. The loss is small against the many log-barrier terms,
+#: so IPOPT's default (monotone from mu = 0.1) first solves a different problem (angles near
+#: pi/2, long sides): the simultaneous transcription loses feasibility there and never
+#: recovers, the sequential one needs more iterations. "adaptive" suits the simultaneous
+#: NLP; for the sequential one it found a worse local minimum of a small sphere cap, which
+#: a small mu_init does not (docs/solvers.md).
 COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
                 "simultaneous": {"ipopt.mu_strategy": "adaptive"}}
 #: Most iterations of the damped Gauss-Newton Hessian before the exact one takes over (see
-#: DesignProblem._phases). The 20 x 20 sphere cap reaches 0.9% after 23-26.
+#: SolveOptions.ipopt_phases).
 GAUSS_NEWTON_ITERATIONS = 30
 #: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
-#: does it after stop_rms is reached)
-FINAL_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
+#: does it after stop_rms is reached).
+HANDOVER_STOP_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
 
 
 @dataclass(frozen=True)
@@ -67,17 +74,136 @@ class Start:
 
 
 @dataclass(frozen=True)
+class SolveOptions:
+    """How a :class:`DesignProblem` is solved (the [solve] table of a design file).
+
+    * ``solver``: "levenberg-marquardt" (the default) or "ipopt". Levenberg-Marquardt runs
+      on the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only):
+      its variables are the boundary data, omega and the alignment, every iterate is
+      re-marched, so every iterate is an admissible design, and the inequalities enter each
+      step linearised (a small QP). It stops at ``stop_rms``; when it stalls, IPOPT (with
+      ``hessian``) finishes from its point. Measured against IPOPT in
+      studies/results/default_solver.md;
+    * ``transcription``: "simultaneous" (all pattern and kinematic quantities as variables,
+      the marching equations as sparse equality constraints) or "sequential" (the marching
+      graph as a function of the boundary data; IPOPT only). Both state the same NLP;
+    * ``hessian``: IPOPT's Hessian, "exact", "gauss-newton" or "limited-memory" (L-BFGS).
+      "gauss-newton" is J^T J of the residuals plus ``damping`` times a diagonal
+      Levenberg-Marquardt term (:func:`rffqm_nlp.transcription.gauss_newton_hessian`), for
+      at most :data:`GAUSS_NEWTON_ITERATIONS` iterations, after which the exact Hessian
+      takes over from the last iterate and its multipliers unless ``stop_rms`` was reached
+      or IPOPT stopped with a status of :data:`HANDOVER_STOP_STATUSES`
+      (:meth:`ipopt_phases`);
+    * ``damping``: weight of the Levenberg-Marquardt term of "gauss-newton", and the first
+      damping of solver "levenberg-marquardt" (then adapted every step; must be > 0);
+    * ``continuation``: multipliers of the regularization weight for successive solves, each
+      warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
+      fit improve; the default is one solve);
+    * ``max_iter``, ``tol``, ``time_limit`` (seconds): the limits, over all solvers and
+      stages (``tol``: IPOPT's);
+    * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance
+      of the target lattice (a fraction of the target's diameter) with every constraint
+      holding (status "Fit_Reached"); None runs to the solver's tolerance. With the
+      simultaneous transcription IPOPT's iterates are judged by their boundary data
+      re-marched (see :class:`_IterationLog`);
+    * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (None:
+      :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start);
+    * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01},
+      or "output_file" with "file_print_level"), applied last; checked against IPOPT when
+      the options are made. Options that a field above sets (:data:`IPOPT_FIELDS`) are
+      refused;
+    * ``multistart``: solve from this many starting Miuras and keep the best fit
+      (:func:`solve_multistart`); ``seed``: the seed of their perturbations.
+    """
+
+    solver: str = LM
+    transcription: str = "simultaneous"
+    hessian: str = "exact"
+    damping: float = 0.03
+    continuation: tuple[float, ...] = (1.0,)
+    max_iter: int = 1000
+    tol: float = 1e-6
+    time_limit: float | None = None
+    stop_rms: float | None = None
+    barrier_init: float | None = None
+    ipopt_options: dict[str, str | int | float] = field(default_factory=dict)
+    multistart: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _choice("solver", self.solver, SOLVERS)
+        _choice("transcription", self.transcription, TRANSCRIPTIONS)
+        _choice("hessian", self.hessian, HESSIANS)
+        if self.solver == LM and self.transcription != "simultaneous":
+            raise InputError("solver 'levenberg-marquardt' marches the simultaneous NLP's "
+                             "design; use transcription 'simultaneous'")
+        continuation = _floats("continuation", self.continuation)
+        if not continuation or any(not c > 0 for c in continuation):
+            raise InputError(f"continuation needs positive multipliers, got {self.continuation}")
+        object.__setattr__(self, "continuation", continuation)
+        object.__setattr__(self, "damping", _number("damping", self.damping, lower=0.0))
+        if self.solver == LM and not self.damping > 0:
+            raise InputError("solver 'levenberg-marquardt' starts from damping, which must be "
+                             f"positive; got {self.damping}")
+        object.__setattr__(self, "max_iter", _whole("max_iter", self.max_iter, 1))
+        object.__setattr__(self, "tol", _number("tol", self.tol, positive=True))
+        for name in ("time_limit", "stop_rms", "barrier_init"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _number(name, getattr(self, name),
+                                                       positive=True, optional=True))
+        object.__setattr__(self, "multistart", _whole("multistart", self.multistart, 1))
+        object.__setattr__(self, "seed", _whole("seed", self.seed, 0))
+        object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
+
+    def ipopt_phases(self, done: int) -> list[tuple[str, int]]:
+        """(Hessian, iteration limit) of each IPOPT run of one solve stage, ``done``
+        iterations having been spent already.
+
+        With ``hessian = "gauss-newton"`` the damped Gauss-Newton runs first, for at most
+        :data:`GAUSS_NEWTON_ITERATIONS`; unless it reaches stop_rms or converges, the exact
+        Hessian takes over from its last iterate and multipliers. On its own it converges
+        only linearly, and its last iterates may fail the re-march check.
+        """
+        left = self.max_iter - done
+        if self.hessian != "gauss-newton":
+            return [(self.hessian, left)]
+        first = min(GAUSS_NEWTON_ITERATIONS, left)
+        return [("gauss-newton", first)] + ([("exact", left - first)] if left > first else [])
+
+    def expand(self, panels: tuple[int, int]) -> bool:
+        """Expand the NLP to SX (fast evaluation, costly derivative build) or keep MX.
+
+        The sequential NLP is dense: its SX Hessian's build grows fast with the pattern, so
+        only patterns up to :data:`SX_MAX_PANELS` panels are expanded. The simultaneous
+        NLP's time goes to the linear solver, not to evaluations, so it stays MX
+        (docs/solvers.md).
+        """
+        return self.transcription == "sequential" and panels[0] * panels[1] <= SX_MAX_PANELS
+
+    def to_config(self) -> dict[str, Any]:
+        """The options as a TOML-ready [solve] table (unset optional values left out)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out.update(continuation=list(self.continuation), ipopt_options=dict(self.ipopt_options))
+        return {k: v for k, v in out.items() if v is not None}
+
+    @classmethod
+    def from_config(cls, table: dict[str, Any]) -> "SolveOptions":
+        """Options from a [solve] table; an unknown key is refused with the closest known."""
+        _check_keys("solve", table, [f.name for f in fields(cls)])
+        return cls(**table)
+
+
+@dataclass(frozen=True)
 class DesignProblem:
     """Which RFFQM pattern, perturbed from a Miura-ori, folds into ``target``?
 
     Parameters (all with defaults chosen so designs are manufacturable):
 
     * ``panels``: (2N, 2M) panels, both even; the coarse lattice is (N+1) x (M+1);
-    * ``layout``, ``alpha0``, ``omega0``: the starting Miura-ori (PAPER_NOTES s.6); its side
+    * ``layout``, ``alpha0``, ``omega0``: the starting Miura-ori (docs/paper.md); its side
       lengths are chosen so that its coarse lattice at ``omega0`` has the target lattice's
-      mean spacings. The default layout "zigzag_i" (zig-zag along the target's u) needed
-      15-90 iterations on the bundled targets at 20 x 20 panels where "zigzag_j" needed
-      190-1000+ (studies/inverse_examples.py);
+      mean spacings. The default layout "zigzag_i" (zig-zag along the target's u) needs far
+      fewer iterations than "zigzag_j" on the bundled targets (docs/solvers.md);
     * ``min_angle``: every sector angle in [min_angle, pi - min_angle] (this also keeps the
       first check, eq:firstCheck, away from its limits);
     * ``mu_margin``: |mu_abc| of every panel stays on its starting side of 1 by this margin
@@ -93,56 +219,9 @@ class DesignProblem:
       :func:`rffqm_nlp.transcription.loss_residuals`; "regularization" (Tikhonov, towards
       the Miura start) and "smoothness" (second differences of the boundary perturbation
       along each edge, :func:`rffqm_nlp.transcription.smoothness_residuals`; default 0);
-      missing keys count as 0;
-    * ``continuation``: multipliers of the regularization weight for successive solves, each
-      warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
-      fit improve; the default is one solve);
-    * ``transcription``: "simultaneous" (the default: all pattern and kinematic quantities
-      as variables, the marching equations as sparse equality constraints) or "sequential"
-      (the marching graph as a function of the boundary data). Both state the same NLP; on
-      the bundled targets at 8-16 panels a side, both layouts, the simultaneous one solved
-      18 of 18 (the sequential one 16), 1.5-6.8x faster
-      (studies/results/compare_transcriptions.md), and it converges at 40 x 40;
-      ``hessian``: "exact" (the default), "gauss-newton" or "limited-memory" (L-BFGS).
-      "gauss-newton" is J^T J of the residuals plus ``damping`` times a diagonal
-      Levenberg-Marquardt term (:func:`rffqm_nlp.transcription.gauss_newton_hessian`),
-      for at most :data:`GAUSS_NEWTON_ITERATIONS` iterations, after which the exact
-      Hessian takes over from the last iterate and its multipliers unless ``stop_rms`` was
-      reached or IPOPT converged (:meth:`_phases`). It factorises the KKT system once per
-      iteration instead of about twice: to stop_rms 0.9%, the bundled targets (whose files
-      choose it) took 0.7-1.9 s at 20 x 20 panels against 2.6-4.2 s with the exact
-      Hessian, 3.5-7.7 s at 40 x 40 against 19-32 s, and 42-85 s at 100 x 100 for two of
-      them (studies/results/solve_cost.md). The 100 x 100 sphere cap did not reach 0.9%
-      with it (its objective fell from 5.0 to 0.15 in 21 iterations, then rose, its
-      iterates violating the marching equations by 0.01-0.02) where the exact Hessian
-      takes 392 s, so the exact Hessian stays IPOPT's default;
-    * ``solver``: "ipopt" (the default) or "levenberg-marquardt": Levenberg-Marquardt on
-      the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only).
-      Its variables are the boundary data, omega and the alignment; every iterate is
-      re-marched, so every iterate is an admissible design, and the inequalities enter
-      each step linearised (a small QP). It stops at ``stop_rms``; when it no longer
-      lowers the loss by 0.01% a step, IPOPT (with ``hessian``) finishes from its point.
-      The bundled target files choose it: to their 0.9%, the three targets took 8, 2 and 2
-      iterations and 0.4-0.7 s at 20 x 20 panels, and the sphere cap 6 iterations and
-      39 s at 100 x 100, where IPOPT took 392 s (studies/results/solve_cost.md);
-    * ``damping``: weight of the Levenberg-Marquardt term of "gauss-newton" (default 0.03;
-      without it the 20 x 20 sphere cap had not reached 0.9% after 380 iterations, with
-      0.02-0.04 it took 23-26, the hyperboloid and the quarter vase 4-5), and the first
-      damping of solver "levenberg-marquardt" (then adapted every step; must be > 0);
-    * ``max_iter``, ``tol``, ``time_limit`` (seconds): IPOPT's limits;
-    * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance of
-      the target lattice (a fraction of the target's diameter) with every constraint holding
-      (status "Fit_Reached"); None (the default) runs IPOPT to its tolerance. With the
-      simultaneous transcription the designs judged are the iterates' boundary data
-      re-marched (see :class:`_IterationLog`): with the exact Hessian the bundled 20 x 20
-      targets stop after 22, 11 and 11 iterations instead of 40, 36 and 31;
-    * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (default
-      None: :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start);
-    * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01},
-      or "output_file" with "file_print_level"), applied last; checked against IPOPT when
-      the problem is made. Options that a field above sets (:data:`IPOPT_FIELDS`) are
-      refused. Which start options pay off depends on the target and size
-      (studies/results/ipopt_start.md), so the defaults stay IPOPT's.
+      missing keys count as 0.
+
+    How it is solved is a :class:`SolveOptions`, given to :meth:`solve`.
     """
 
     target: surfaces.Surface
@@ -156,46 +235,31 @@ class DesignProblem:
     omega_bounds: tuple[float, float] = (0.05, PI - 0.05)
     fix: tuple[str, ...] = ()
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
-    continuation: tuple[float, ...] = (1.0,)
-    transcription: str = "simultaneous"
-    solver: str = "ipopt"
-    hessian: str = "exact"
-    damping: float = 0.03
-    max_iter: int = 1000
-    tol: float = 1e-6
-    time_limit: float | None = None
-    stop_rms: float | None = None
-    barrier_init: float | None = None
-    ipopt_options: dict[str, str | int | float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
             raise InputError("target must be a surface from rq.surfaces (get, Custom, load), "
                              f"got {type(self.target).__name__}")
-        panels = tuple(int(p) for p in self.panels)
-        if len(panels) != 2 or any(p < 4 or p % 2 for p in panels):
-            raise InputError(f"panels must be two even numbers >= 4 (2N, 2M), got {self.panels}")
-        object.__setattr__(self, "panels", panels)
+        panels = self.panels
+        if (not isinstance(panels, (list, tuple)) or len(panels) != 2
+                or any(isinstance(p, bool) or not isinstance(p, (int, np.integer))
+                       or p < 4 or p % 2 for p in panels)):
+            raise InputError(f"panels must be two even numbers >= 4 (2N, 2M), got {panels!r}")
+        object.__setattr__(self, "panels", tuple(int(p) for p in panels))
+        if isinstance(self.fix, str) or not isinstance(self.fix, (list, tuple)):
+            raise InputError(f"fix must be a list of groups among {GROUPS}, got {self.fix!r}")
         object.__setattr__(self, "fix", tuple(self.fix))
-        object.__setattr__(self, "continuation", tuple(float(c) for c in self.continuation))
-        if not self.continuation or any(not c > 0 for c in self.continuation):
-            raise InputError(f"continuation needs positive multipliers, got {self.continuation}")
-        object.__setattr__(self, "omega_bounds", tuple(float(w) for w in self.omega_bounds))
-        object.__setattr__(self, "weights", {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0),
-                                             **{k: float(v) for k, v in self.weights.items()}})
-        _choice("layout", self.layout, LAYOUTS)
-        _choice("transcription", self.transcription, TRANSCRIPTIONS)
-        _choice("hessian", self.hessian, HESSIANS)
-        _choice("solver", self.solver, SOLVERS)
-        if self.solver == "levenberg-marquardt" and self.transcription != "simultaneous":
-            raise InputError("solver='levenberg-marquardt' marches the simultaneous NLP's "
-                             "design; use transcription='simultaneous'")
         for name in self.fix:
             _choice("fix", name, GROUPS)
-        unknown = set(self.weights) - set(DEFAULT_WEIGHTS)
-        if unknown or any(w < 0 for w in self.weights.values()) or not any(self.weights.values()):
-            raise InputError(f"weights take non-negative values for {sorted(DEFAULT_WEIGHTS)}, "
-                             f"not all zero; got {self.weights}")
+        _choice("layout", self.layout, LAYOUTS)
+        for name in ("alpha0", "omega0", "min_angle", "mu_margin", "min_length"):
+            object.__setattr__(self, name, _number(name, getattr(self, name)))
+        bounds = _floats("omega_bounds", self.omega_bounds)
+        if len(bounds) != 2:
+            raise InputError(f"omega_bounds must be two numbers [low, high], got "
+                             f"{self.omega_bounds!r}")
+        object.__setattr__(self, "omega_bounds", bounds)
+        object.__setattr__(self, "weights", _weights(self.weights))
         if not 0 < self.alpha0 < PI / 2:
             raise InputError(f"alpha0 must be an acute angle in (0, pi/2), got {self.alpha0}")
         if not 0 <= self.min_angle < PI / 4:
@@ -208,19 +272,6 @@ class DesignProblem:
         if not -PI <= lo < hi <= PI or not lo <= self.omega0 <= hi:
             raise InputError(f"need -pi <= omega_bounds[0] <= omega0 <= omega_bounds[1] <= pi, "
                              f"got omega0 = {self.omega0}, omega_bounds = {self.omega_bounds}")
-        if self.stop_rms is not None and not self.stop_rms > 0:
-            raise InputError(f"stop_rms must be a positive fraction of the diameter or None, "
-                             f"got {self.stop_rms}")
-        if self.barrier_init is not None and not self.barrier_init > 0:
-            raise InputError(f"barrier_init must be positive or None, got {self.barrier_init}")
-        if not 0 <= self.damping < np.inf:
-            raise InputError(f"damping must be a finite number >= 0, got {self.damping}")
-        if self.solver == "levenberg-marquardt" and not self.damping > 0:
-            raise InputError("solver='levenberg-marquardt' starts from damping, which must be "
-                             f"positive; got {self.damping}")
-        if self.max_iter < 1 or not self.tol > 0:
-            raise InputError("max_iter must be >= 1 and tol > 0")
-        object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
 
     @property
     def N(self) -> int:
@@ -254,8 +305,10 @@ class DesignProblem:
                      spacing=0.5 * (t_i + t_j), rotation=R, translation=t)
 
     def transcribe(self, start: Start | None = None, weights: dict[str, float] | None = None,
-                   initial: DesignResult | None = None) -> transcription.NLP:
-        """The NLP of this problem in the chosen transcription.
+                   initial: DesignResult | None = None,
+                   options: SolveOptions | None = None) -> transcription.NLP:
+        """The NLP of this problem in the transcription of ``options`` (default
+        :class:`SolveOptions`: the simultaneous one).
 
         ``weights`` override the problem's; ``initial`` (a result of a problem of the same
         size, in either transcription) replaces the Miura as the initial guess, while the
@@ -277,190 +330,176 @@ class DesignProblem:
             min_length=self.min_length, mu_margin=self.mu_margin,
             omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
             reference_omega=start.omega)
-        return getattr(transcription, self.transcription)(setup)
+        return getattr(transcription, (options or SolveOptions()).transcription)(setup)
 
     # ------------------------------------------------------------------ solve
-    def solve(self, callback: Callable[[dict], None] | None = None,
+    def solve(self, options: SolveOptions | None = None, *,
+              callback: Callable[[dict], None] | None = None,
               warm_start: DesignResult | None = None, verbose: bool = False,
-              multistart: int = 1, seed: int = 0) -> DesignResult:
-        """Solve the design with IPOPT; see the module docstring.
+              **overrides: Any) -> DesignResult:
+        """Solve the design with ``options`` (default :class:`SolveOptions`), with any
+        SolveOptions field overridden by name (``solve(solver="ipopt")``).
 
         ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration
         ("elapsed": seconds since the solve started).
         ``warm_start``: a result of a problem of the same size to start from instead of the
         Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern).
-        ``multistart`` > 1: solve from that many starting Miuras (the first the problem's own,
-        the others with alpha0 and omega0 perturbed, seeded by ``seed``) and keep the
-        successful result with the smallest fit["rms"]; see :func:`_multistart`.
-        Raises :class:`InfeasibleDesign` when IPOPT finds the constraints infeasible,
-        :class:`SolverFailed` (with IPOPT's status, the last iterate and the best feasible
-        one) otherwise.
+        ``verbose``: IPOPT prints its iterations.
+        With ``options.multistart`` > 1 see :func:`solve_multistart`.
+        Raises :class:`InfeasibleDesign` when the constraints cannot hold,
+        :class:`SolverFailed` (with the solver's status, the statistics, the last iterate and
+        the best admissible one) otherwise, status "non_finite" when the solve ended with a
+        NaN or inf in the design, the objective or the fit.
         """
-        if multistart != 1:
-            return _multistart(self, multistart, seed, callback, warm_start, verbose)
+        options = _with_overrides(options, overrides)
+        if options.multistart != 1:
+            return solve_multistart(self, options, callback=callback, warm_start=warm_start,
+                                    verbose=verbose)
+        self._check_reachable()
+        start = self.start()
+        record = _Record(callback=callback, verbose=verbose)
+        x = None
+        for stage, factor in enumerate(options.continuation):
+            t1 = time.perf_counter()
+            nlp = self.transcribe(start, self._stage_weights(factor),
+                                  warm_start if x is None else None, options)
+            record.build_time += time.perf_counter() - t1
+            outcome = self._solve_stage(nlp, start, options, record, nlp.x0 if x is None else x,
+                                        warm=warm_start is not None or stage > 0)
+            x = outcome.x
+            if not outcome.success or outcome.status == "Fit_Reached":
+                break
+        stats = record.stats(options, outcome)
+        if not outcome.success:
+            _raise_failure(nlp, outcome, stats, record.iterations)
+        return self._result(nlp, start, outcome.x, stats, options)
+
+    def _check_reachable(self) -> None:
         if self.min_length >= 1:
             raise InfeasibleDesign(
                 f"min_length = {self.min_length} asks every side to be at least the mean side, "
                 "which only equal sides satisfy; choose min_length < 1 (default 0.2)")
-        t0 = time.perf_counter()
-        start = self.start()
-        x = None
-        history: dict[str, list] = {"iter": [], "objective": [], "inf_pr": [], "elapsed": []}
-        iterations, t_build = 0, 0.0
-        counts = {"gauss_newton_iterations": 0, "marched_iterations": 0}
-        for stage, factor in enumerate(self.continuation):
-            weights = dict(self.weights, regularization=factor * self.weights["regularization"])
-            t1 = time.perf_counter()
-            nlp = self.transcribe(start, weights, warm_start if x is None else None)
-            if x is None:
-                x = nlp.x0
-            t_build += time.perf_counter() - t1
-            sol, log, best = None, None, None
-            phases = self._phases(iterations)
-            march = None
-            if self.solver == "levenberg-marquardt":
-                march = self._march(nlp, start, x, history, callback, iterations, t0)
-            if march is not None and march.status != "Inadmissible_Start":
-                iterations += march.iterations
-                counts["marched_iterations"] += march.iterations
-                x, best, objective = march.x, march.x, march.objective
-                status, success = march.status, march.status == "Fit_Reached"
-                if status == "Stalled" and iterations >= self.max_iter:
-                    status = "Maximum_Iterations_Exceeded"
-                phases = self._phases(iterations) if status == "Stalled" else []
-            multipliers: dict[str, Any] = {}
-            for hessian, max_iter in phases:
-                t1 = time.perf_counter()
-                solver, log = self._solver(
-                    nlp, start, history, callback, verbose, hessian=hessian,
-                    max_iter=max_iter, elapsed=t1 - t0, best=log if multipliers else None,
-                    warm=(warm_start is not None or stage > 0 or bool(multipliers)
-                          or best is not None),
-                    multipliers=bool(multipliers))
-                t_build += time.perf_counter() - t1
-                sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg,
-                             **multipliers)
-                stats = dict(solver.stats())
-                status = "Fit_Reached" if log.reached else stats["return_status"]
-                success = log.reached or bool(stats["success"])
-                x = log.reached_x if log.reached else sol["x"].full().ravel()
-                objective = log.reached_objective if log.reached else float(sol["f"])
-                best = log.best if log.best is not None else best
-                iterations += int(stats["iter_count"])
-                if hessian == "gauss-newton":
-                    counts["gauss_newton_iterations"] += int(stats["iter_count"])
-                if log.reached or status in FINAL_STATUSES:
-                    break
-                multipliers = {"lam_g0": sol["lam_g"], "lam_x0": sol["lam_x"]}
-            solve_stats = {"status": status, "success": success,
-                           "iterations": iterations, "build_time": t_build,
-                           "solve_time": time.perf_counter() - t0 - t_build,
-                           "objective": objective, "history": history,
-                           "transcription": self.transcription, "hessian": self.hessian,
-                           "solver": self.solver, **counts}
-            if not success or status == "Fit_Reached":
+
+    def _stage_weights(self, factor: float) -> dict[str, float]:
+        """The loss weights of a continuation stage: regularization times ``factor``."""
+        return dict(self.weights, regularization=factor * self.weights["regularization"])
+
+    def _solve_stage(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
+                     record: "_Record", x: np.ndarray, warm: bool) -> "_Outcome":
+        """One continuation stage from x: Levenberg-Marquardt (with that solver), then
+        IPOPT when it stalls or cannot start (an inadmissible start)."""
+        if options.solver == LM:
+            marched = self._solve_levenberg_marquardt(nlp, start, options, record, x)
+            if marched is not None and marched.status != "Stalled":
+                return marched
+            if marched is not None:
+                return self._solve_ipopt(nlp, start, options, record, marched.x, True,
+                                         marched.best)
+        return self._solve_ipopt(nlp, start, options, record, x, warm, None)
+
+    def _solve_levenberg_marquardt(self, nlp: transcription.NLP, start: Start,
+                                   options: SolveOptions, record: "_Record",
+                                   x: np.ndarray) -> "_Outcome | None":
+        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x,
+        every step recorded; None when x is not an admissible start (no step taken)."""
+        deadline = None if options.time_limit is None else record.t0 + options.time_limit
+        out = reduced.levenberg_marquardt(
+            nlp, x, options.damping, options.max_iter - record.iterations, deadline=deadline,
+            stop=self._fit_reached(nlp, start, options), callback=record.log)
+        if out.status == "Inadmissible_Start":
+            return None
+        record.iterations += out.iterations
+        record.marched_iterations += out.iterations
+        status = out.status
+        if status == "Stalled" and record.iterations >= options.max_iter:
+            status = "Maximum_Iterations_Exceeded"
+        return _Outcome(x=out.x, status=status, success=status == "Fit_Reached",
+                        objective=out.objective, best=out.x)
+
+    def _solve_ipopt(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
+                     record: "_Record", x: np.ndarray, warm: bool,
+                     best: np.ndarray | None) -> "_Outcome":
+        """IPOPT from x: one run per phase of :meth:`SolveOptions.ipopt_phases`, each later
+        run handed the last one's iterate and multipliers (:func:`_handover`)."""
+        multipliers: dict[str, Any] = {}
+        log = None
+        for hessian, max_iter in options.ipopt_phases(record.iterations):
+            outcome, log = self._ipopt_run(nlp, start, options, record, x, hessian, max_iter,
+                                           warm=warm or bool(multipliers), best=best,
+                                           multipliers=multipliers, previous=log)
+            x, best = outcome.x, outcome.best
+            multipliers = _handover(outcome)
+            if multipliers is None:
                 break
-        if not success:
-            if sol is None:
-                raise SolverFailed(
-                    f"the marched Levenberg-Marquardt solve did not finish the design: status "
-                    f"{status} after {iterations} iterations; raise max_iter or time_limit",
-                    status=status, stats=solve_stats, last_iterate=x, best_iterate=best)
-            raise_for_ipopt(
-                status, iterations, "the design",
-                f"{_violation_report(nlp, sol)}; relax min_length, min_angle or mu_margin",
-                "raise max_iter or time_limit, or relax tol", solve_stats, x, best)
-        return self._result(nlp, start, x, solve_stats)
+        return outcome
 
-    def _phases(self, done: int) -> list[tuple[str, int]]:
-        """(Hessian, iteration limit) of each IPOPT run of one solve stage, ``done``
-        iterations having been spent by earlier stages.
+    def _ipopt_run(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
+                   record: "_Record", x: np.ndarray, hessian: str, max_iter: int, warm: bool,
+                   best: np.ndarray | None, multipliers: dict[str, Any],
+                   previous: "_IterationLog | None") -> tuple["_Outcome", "_IterationLog"]:
+        """One IPOPT run with ``hessian`` for at most ``max_iter`` iterations."""
+        t1 = time.perf_counter()
+        solver, log = self._ipopt_solver(
+            nlp, start, options, record, hessian=hessian, max_iter=max_iter,
+            elapsed=t1 - record.t0, warm=warm, multipliers=bool(multipliers),
+            previous=previous if multipliers else None)
+        record.build_time += time.perf_counter() - t1
+        sol = solver(x0=x, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg, **multipliers)
+        stats = dict(solver.stats())
+        record.iterations += int(stats["iter_count"])
+        if hessian == "gauss-newton":
+            record.gauss_newton_iterations += int(stats["iter_count"])
+        if log.reached:
+            outcome = _Outcome(x=log.reached_x, status="Fit_Reached", success=True,
+                               objective=log.reached_objective, best=log.best, sol=sol)
+        else:
+            outcome = _Outcome(x=sol["x"].full().ravel(), status=stats["return_status"],
+                               success=bool(stats["success"]), objective=float(sol["f"]),
+                               best=log.best, sol=sol)
+        if outcome.best is None:
+            outcome = replace(outcome, best=best)
+        return outcome, log
 
-        With ``hessian = "gauss-newton"`` the damped Gauss-Newton runs first, for at most
-        :data:`GAUSS_NEWTON_ITERATIONS`; unless it reaches stop_rms or converges, the exact
-        Hessian takes over from its last iterate and multipliers. On its own it converges
-        only linearly: to IPOPT's tolerance the 20 x 20 sphere cap had not converged after
-        800 iterations, and the hyperboloid's and quarter vase's last iterates failed the
-        re-march check (folded states 6-8e-8 off the NumPy re-march, where 1e-8 is allowed).
-        """
-        left = self.max_iter - done
-        if self.hessian != "gauss-newton":
-            return [(self.hessian, left)]
-        first = min(GAUSS_NEWTON_ITERATIONS, left)
-        return [("gauss-newton", first)] + ([("exact", left - first)] if left > first else [])
-
-    def _march(self, nlp: transcription.NLP, start: Start, x: np.ndarray, history: dict,
-               callback, done: int, t0: float) -> reduced.Outcome:
-        """The Levenberg-Marquardt run on the marching manifold (:mod:`rffqm_nlp.reduced`)
-        from x, ``done`` iterations having been spent, recording every step in ``history``."""
-
-        def record(objective: float, violation: float) -> None:
-            entry = {"iter": len(history["iter"]), "objective": objective,
-                     "inf_pr": violation, "elapsed": time.perf_counter() - t0}
-            for key, value in entry.items():
-                history[key].append(value)
-            if callback is not None:
-                callback(entry)
-
-        deadline = None if self.time_limit is None else t0 + float(self.time_limit)
-        return reduced.levenberg_marquardt(
-            nlp, x, self.damping, self.max_iter - done, deadline=deadline,
-            stop=self._fit_reached(nlp, start), callback=record)
-
-    def _solver(self, nlp: transcription.NLP, start: Start, history: dict, callback,
-                verbose: bool, hessian: str, max_iter: int, elapsed: float = 0.0,
-                warm: bool = False, multipliers: bool = False, best=None):
-        f = nlp.objective
+    def _ipopt_solver(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
+                      record: "_Record", hessian: str, max_iter: int, elapsed: float = 0.0,
+                      warm: bool = False, multipliers: bool = False, previous=None):
         opts: dict[str, Any] = {
-            "ipopt.max_iter": max_iter, "ipopt.tol": self.tol,
-            "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if verbose else 0,
-            "print_time": verbose, "ipopt.sb": "yes", "expand": self._expand()}
-        if self.time_limit is not None:
-            opts["ipopt.max_wall_time"] = max(float(self.time_limit) - elapsed, 1e-3)
-        if warm or self.barrier_init is not None:
+            "ipopt.max_iter": max_iter, "ipopt.tol": options.tol,
+            "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if record.verbose else 0,
+            "print_time": record.verbose, "ipopt.sb": "yes",
+            "expand": options.expand(self.panels)}
+        if options.time_limit is not None:
+            opts["ipopt.max_wall_time"] = max(options.time_limit - elapsed, 1e-3)
+        if warm or options.barrier_init is not None:
             # near an optimum a small barrier keeps IPOPT from wandering off
-            mu_init = 1e-6 if self.barrier_init is None else self.barrier_init
+            mu_init = 1e-6 if options.barrier_init is None else options.barrier_init
             opts.update({"ipopt.mu_init": mu_init, "ipopt.bound_push": 1e-9,
                          "ipopt.bound_frac": 1e-9})
         else:
-            opts.update(COLD_BARRIER[self.transcription])
+            opts.update(COLD_BARRIER[options.transcription])
         if multipliers:
             opts["ipopt.warm_start_init_point"] = "yes"
-        opts.update({f"ipopt.{name}": value for name, value in self.ipopt_options.items()})
+        opts.update({f"ipopt.{name}": value for name, value in options.ipopt_options.items()})
         if hessian == "limited-memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         elif hessian == "gauss-newton":
-            opts["hess_lag"] = transcription.gauss_newton_hessian(nlp, self.damping)
+            opts["hess_lag"] = transcription.gauss_newton_hessian(nlp, options.damping)
         elif nlp.parts is not None:
             opts["hess_lag"] = transcription.lagrangian_hessian(nlp)
-        log = _IterationLog(nlp, history, callback, self._fit_reached(nlp, start), best,
+        log = _IterationLog(nlp, record.history, record.callback,
+                            self._fit_reached(nlp, start, options), previous,
                             t0=time.perf_counter() - elapsed)
         opts["iteration_callback"] = log
-        solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": f, "g": nlp.g}, opts)
+        solver = ca.nlpsol("design", "ipopt", {"x": nlp.x, "f": nlp.objective, "g": nlp.g},
+                           opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
         return solver, log
 
-    def _expand(self) -> bool:
-        """Expand the NLP to SX (fast evaluation, costly derivative build) or keep MX.
-
-        The sequential NLP is dense: its SX Hessian took 2-5 s to build at 8 x 8 panels and
-        19-31 s (3.4 GB) at 16 x 16 to 20 x 20, while the MX Hessian builds in 0.4-4 s but
-        costs 0.1-0.4 s per evaluation against 0.01-0.1 s. Measured on the bundled targets,
-        SX was faster in total up to 12 x 12 panels (:data:`SX_MAX_PANELS`), MX from 16 x 16
-        on. The simultaneous NLP's time goes to MUMPS, not to evaluations, and its SX
-        Hessian build grows with the pattern (3.3 s at 20 x 20, 15 s at 40 x 40, most of
-        the 282 s build at 100 x 100), so it stays MX: build + solve of the sphere cap took
-        0.50 s against 0.62 s at 8 x 8, 1.5 s against 2.2 s at 12 x 12 and 6.5 s against
-        9.5 s at 20 x 20.
-        """
-        return (self.transcription == "sequential"
-                and self.panels[0] * self.panels[1] <= SX_MAX_PANELS)
-
-    def _fit_reached(self, nlp: transcription.NLP, start: Start):
+    def _fit_reached(self, nlp: transcription.NLP, start: Start, options: SolveOptions):
         """For ``stop_rms``: does the aligned coarse lattice at x fit the target well enough?"""
-        if self.stop_rms is None:
+        if options.stop_rms is None:
             return None
-        limit = self.stop_rms * self.target.diameter()
+        limit = options.stop_rms * self.target.diameter()
 
         def reached(x: np.ndarray) -> bool:
             Y = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
@@ -469,8 +508,9 @@ class DesignProblem:
         return reached
 
     def _result(self, nlp: transcription.NLP, start: Start, x: np.ndarray,
-                stats: dict) -> DesignResult:
+                stats: SolveStats, options: SolveOptions) -> DesignResult:
         """Re-march the solution with the NumPy model, check it, measure the fit."""
+        _require_finite({"the design vector": x, "the objective": stats.objective}, stats, x)
         vec, omega = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
         omega = float(omega[0])
         bd = BoundaryData.from_vector(vec, start.boundary.sigma, 2 * self.N, 2 * self.M)
@@ -487,17 +527,19 @@ class DesignProblem:
                                f"{np.abs(Y - Y_graph).max():.3g}", status="remarch_mismatch",
                                stats=stats, last_iterate=x)
         self._check_constraints(pattern, stats, x)
-        R, t, rms = shape.kabsch(Y[::2, ::2], start.target_points)
+        R, t, _ = shape.kabsch(Y[::2, ::2], start.target_points)
         folded = Y @ R.T + t
-        fit = design_fit(folded[::2, ::2], start.target_points, self.target)
-        fit.update(min_side_over_mean=float(pattern.side_lengths.min()
-                                            / pattern.side_lengths.mean()),
-                   min_sector_angle=float(pattern.sector_angles.min()))
+        fit = Fit(**design_fit(folded[::2, ::2], start.target_points, self.target),
+                  min_side_over_mean=float(pattern.side_lengths.min()
+                                           / pattern.side_lengths.mean()),
+                  min_sector_angle=float(pattern.sector_angles.min()))
+        _require_finite({"the folded state": folded, "the fit": list(fit.to_dict().values())},
+                        stats, x)
         return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
                             target_points=start.target_points, rotation=R, translation=t,
-                            fit=fit, stats=stats, problem=self.to_config(), x=x)
+                            fit=fit, stats=stats, problem=self.config(options), x=x)
 
-    def _check_constraints(self, pattern, stats: dict, x: np.ndarray) -> None:
+    def _check_constraints(self, pattern, stats: SolveStats, x: np.ndarray) -> None:
         tol = 1e-6
         sides = pattern.side_lengths
         worst_angle = float(np.min(np.concatenate([pattern.alpha.ravel(), pattern.beta.ravel(),
@@ -515,45 +557,58 @@ class DesignProblem:
 
     # ------------------------------------------------------------------ configuration
     def to_config(self) -> dict[str, Any]:
-        """The problem as a TOML-ready dict: {"target": ..., "design": ...}."""
-        design = {name: getattr(self, name) for name in self.__dataclass_fields__
-                  if name != "target"}
-        design["weights"] = dict(self.weights)
-        design["panels"] = list(self.panels)
-        design["omega_bounds"] = list(self.omega_bounds)
-        design["fix"] = list(self.fix)
-        design["continuation"] = list(self.continuation)
-        design["ipopt_options"] = dict(self.ipopt_options)
-        if design["time_limit"] is None:
-            design.pop("time_limit")
+        """The problem as TOML-ready tables: {"target": ..., "design": ...}."""
+        design = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "target"}
+        design.update(weights=dict(self.weights), panels=list(self.panels),
+                      omega_bounds=list(self.omega_bounds), fix=list(self.fix))
         return {"target": self.target.to_config(), "design": design}
+
+    def config(self, options: SolveOptions) -> dict[str, Any]:
+        """{"target", "design", "solve"}: this problem solved with ``options``."""
+        return {**self.to_config(), "solve": options.to_config()}
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> "DesignProblem":
-        """A problem from {"target": {...}, "design": {...}} (the tables of a target file)."""
-        if "target" not in config:
-            raise InputError("a design needs a [target] table")
-        design = dict(config.get("design", {}))
-        known = set(cls.__dataclass_fields__) - {"target"}
-        unknown = set(design) - known
-        if unknown:
-            raise InputError(f"unknown [design] keys {sorted(unknown)}; known: {sorted(known)}")
-        return cls(target=surfaces.from_config(config["target"]), **design)
+        """The problem of a design file's tables (see :func:`from_config`)."""
+        return from_config(config)[0]
 
-    @classmethod
-    def load(cls, path: str | Path) -> "DesignProblem":
-        """A problem from a TOML file with [target] and [design] tables."""
-        return cls.from_config(read_toml(path, "design file"))
+
+def from_config(config: dict[str, Any]) -> tuple[DesignProblem, SolveOptions]:
+    """The problem and the options of {"target": ..., "design": ..., "solve": ...} (the
+    tables of a design file; [design] and [solve] may be missing). An unknown table or key
+    is refused with the closest known name, a solve option in [design] with where it goes."""
+    if not isinstance(config, dict):
+        raise InputError(f"a design is a set of tables {', '.join(TABLES)}, got "
+                         f"{type(config).__name__}")
+    for name in config:
+        if name not in TABLES:
+            raise InputError(f"unknown table [{name}]{_closest(name, TABLES, '[{}]')}; a design "
+                             f"file has the tables {', '.join(f'[{t}]' for t in TABLES)}")
+        if not isinstance(config[name], dict):
+            raise InputError(f"[{name}] must be a table, got {type(config[name]).__name__}")
+    if "target" not in config:
+        raise InputError("a design needs a [target] table")
+    design = config.get("design", {})
+    solve_keys = [f.name for f in fields(SolveOptions)]
+    for key in design:
+        if key in solve_keys:
+            raise InputError(f"[design] {key} is a solve option: move it to the [solve] table")
+    _check_keys("design", design, [f.name for f in fields(DesignProblem) if f.name != "target"])
+    problem = DesignProblem(target=surfaces.from_config(config["target"]), **design)
+    return problem, SolveOptions.from_config(config.get("solve", {}))
+
+
+def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
+    """The problem and the options of a design file (TOML with the tables [target],
+    [design] and [solve]), e.g. ``problem, options = load_design("targets/sphere_cap.toml")``."""
+    return from_config(read_toml(path, "design file"))
 
 
 def design_fit(coarse: np.ndarray, target_points: np.ndarray,
                target: surfaces.Surface) -> dict[str, float]:
-    """Fit measures of an aligned coarse lattice, relative to the target's diameter.
-
-    ``rms``: RMS distance to the target lattice (corresponding points); ``rms_surface`` and
-    ``hausdorff``: RMS and largest distance to the target surface; ``plane_rms``: RMS
-    distance of the target lattice to its best-fitting plane, the fit a flat sheet reaches.
-    """
+    """Fit measures of an aligned coarse lattice (N+1, M+1, 3) against the target lattice
+    (N+1, M+1, 3), relative to the target's diameter: ``rms``, ``rms_surface``,
+    ``hausdorff`` and ``plane_rms`` as :class:`~rffqm_nlp.results.Fit` defines them."""
     diameter = target.diameter()
     rms = float(np.sqrt(np.mean(np.sum((coarse - target_points) ** 2, axis=-1))))
     pts = target_points.reshape(-1, 3)
@@ -561,6 +616,154 @@ def design_fit(coarse: np.ndarray, target_points: np.ndarray,
     surface = shape.relative_fit(coarse, target)
     return {"rms": rms / diameter, "rms_surface": surface["rms"],
             "hausdorff": surface["hausdorff"], "plane_rms": float(plane / diameter)}
+
+
+# ---------------------------------------------------------------------- solve steps
+@dataclass
+class _Record:
+    """What a solve has done so far, over its stages and solvers: the iteration history
+    (lists "iter", "objective", "inf_pr", "elapsed"), the counts and the build time."""
+
+    callback: Callable[[dict], None] | None = None
+    verbose: bool = False
+    t0: float = field(default_factory=time.perf_counter)
+    history: dict[str, list] = field(
+        default_factory=lambda: {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
+    iterations: int = 0
+    gauss_newton_iterations: int = 0
+    marched_iterations: int = 0
+    build_time: float = 0.0
+
+    def log(self, objective: float, violation: float) -> None:
+        """Record one iteration (of Levenberg-Marquardt; IPOPT's: :class:`_IterationLog`)."""
+        entry = {"iter": len(self.history["iter"]), "objective": objective,
+                 "inf_pr": violation, "elapsed": time.perf_counter() - self.t0}
+        for key, value in entry.items():
+            self.history[key].append(value)
+        if self.callback is not None:
+            self.callback(entry)
+
+    def stats(self, options: SolveOptions, outcome: "_Outcome") -> SolveStats:
+        """The statistics of a solve that ended with ``outcome``."""
+        objective = np.nan if outcome.objective is None else float(outcome.objective)
+        return SolveStats(
+            status=outcome.status, success=outcome.success, iterations=self.iterations,
+            build_time=self.build_time,
+            solve_time=time.perf_counter() - self.t0 - self.build_time, objective=objective,
+            solver=options.solver, transcription=options.transcription,
+            hessian=options.hessian, gauss_newton_iterations=self.gauss_newton_iterations,
+            marched_iterations=self.marched_iterations, history=self.history)
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """How a solver run ended: its last point ``x``, status, success, objective, the best
+    admissible point met (``best``) and IPOPT's solution (``sol``; None when only
+    Levenberg-Marquardt ran)."""
+
+    x: np.ndarray
+    status: str
+    success: bool
+    objective: float | None
+    best: np.ndarray | None
+    sol: dict | None = None
+
+
+def _handover(outcome: _Outcome) -> dict[str, Any] | None:
+    """The multipliers that the next IPOPT phase (the exact Hessian after Gauss-Newton)
+    starts from, or None when the run is done: stop_rms reached or a status of
+    :data:`HANDOVER_STOP_STATUSES`."""
+    if outcome.status == "Fit_Reached" or outcome.status in HANDOVER_STOP_STATUSES:
+        return None
+    return {"lam_g0": outcome.sol["lam_g"], "lam_x0": outcome.sol["lam_x"]}
+
+
+def _raise_failure(nlp: transcription.NLP, outcome: _Outcome, stats: SolveStats,
+                   iterations: int) -> None:
+    """The named error of an unsuccessful solve."""
+    if outcome.sol is None:
+        raise SolverFailed(
+            f"the marched Levenberg-Marquardt solve did not finish the design: status "
+            f"{outcome.status} after {iterations} iterations; raise max_iter or time_limit",
+            status=outcome.status, stats=stats, last_iterate=outcome.x,
+            best_iterate=outcome.best)
+    raise_for_ipopt(
+        outcome.status, iterations, "the design",
+        f"{_violation_report(nlp, outcome.sol)}; relax min_length, min_angle or mu_margin",
+        "raise max_iter or time_limit, or relax tol", stats, outcome.x, outcome.best)
+
+
+def _require_finite(values: dict[str, Any], stats: SolveStats, x: np.ndarray) -> None:
+    """Raise SolverFailed (status "non_finite") when any of ``values`` holds NaN or inf."""
+    bad = [name for name, value in values.items()
+           if not np.all(np.isfinite(np.asarray(value, dtype=float)))]
+    if bad:
+        raise SolverFailed(f"the solve ended with NaN or inf in {' and '.join(bad)}; no design "
+                           "is returned (check the weights and the target)",
+                           status="non_finite", stats=stats, last_iterate=x)
+
+
+def _with_overrides(options: SolveOptions | None, overrides: dict[str, Any]) -> SolveOptions:
+    """``options`` (default SolveOptions()) with SolveOptions fields given by name."""
+    if options is not None and not isinstance(options, SolveOptions):
+        raise InputError(f"options must be a SolveOptions, got {type(options).__name__}")
+    _check_keys("solve", overrides, [f.name for f in fields(SolveOptions)], "solve() option")
+    return replace(options or SolveOptions(), **overrides)
+
+
+# ---------------------------------------------------------------------- validation
+def _check_keys(table: str, mapping: dict[str, Any], known: list[str],
+                what: str | None = None) -> None:
+    """Refuse a key of ``mapping`` not in ``known``, naming the closest known one."""
+    for key in mapping:
+        if key not in known:
+            hint = _closest(str(key), known) or f"; known: {', '.join(sorted(known))}"
+            raise InputError(f"unknown {what or f'[{table}] key'} {key!r}{hint}")
+
+
+def _closest(name: str, known, form: str = "{!r}") -> str:
+    close = difflib.get_close_matches(name, list(known), n=1)
+    return f"; did you mean {form.format(close[0])}?" if close else ""
+
+
+def _number(name: str, value: Any, lower: float | None = None, positive: bool = False,
+            optional: bool = False) -> float:
+    """``value`` as a finite float (> 0 when ``positive``, >= ``lower``), else InputError."""
+    if (isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating))
+            or not math.isfinite(value)):
+        raise InputError(f"{name} must be a finite number{' or None' if optional else ''}, "
+                         f"got {value!r}")
+    if positive and not value > 0:
+        raise InputError(f"{name} must be positive, got {value!r}")
+    if lower is not None and value < lower:
+        raise InputError(f"{name} must be >= {lower}, got {value!r}")
+    return float(value)
+
+
+def _whole(name: str, value: Any, lower: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lower:
+        raise InputError(f"{name} must be a whole number >= {lower}, got {value!r}")
+    return int(value)
+
+
+def _floats(name: str, values: Any) -> tuple[float, ...]:
+    if isinstance(values, (str, bytes)) or not isinstance(values, (list, tuple)):
+        raise InputError(f"{name} must be a list of numbers, got {values!r}")
+    return tuple(_number(f"{name}[{i}]", v) for i, v in enumerate(values))
+
+
+def _weights(weights: Any) -> dict[str, float]:
+    """The loss weights with every key of DEFAULT_WEIGHTS (missing ones 0), checked."""
+    allowed = (f"weights take finite non-negative numbers for {', '.join(DEFAULT_WEIGHTS)}, "
+               "not all zero")
+    if not isinstance(weights, dict):
+        raise InputError(f"{allowed}; got {weights!r}")
+    _check_keys("design.weights", weights, list(DEFAULT_WEIGHTS), "weight")
+    out = {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0),
+           **{k: _number(f"weights.{k}", v, lower=0.0) for k, v in weights.items()}}
+    if not any(out.values()):
+        raise InputError(f"{allowed}; got {weights!r}")
+    return out
 
 
 def _ipopt_options(options: dict) -> dict[str, str | int | float]:
@@ -573,7 +776,7 @@ def _ipopt_options(options: dict) -> dict[str, str | int | float]:
     for key, value in options.items():
         name = str(key).removeprefix("ipopt.")
         if name in IPOPT_FIELDS:
-            raise InputError(f"ipopt_options: set {name} through DesignProblem's "
+            raise InputError(f"ipopt_options: set {name} through SolveOptions' "
                              f"{IPOPT_FIELDS[name]}, not ipopt_options")
         if isinstance(value, bool) or not isinstance(value, (str, int, float)):
             raise InputError(f"ipopt_options: {name} = {value!r} must be a number or a string "
@@ -613,8 +816,7 @@ class _IterationLog(ca.Callback):
     and the NLP can project it (``nlp.project``: the simultaneous transcription re-marches
     the iterate's boundary data), the projected point is judged instead, with its own
     objective: the simultaneous NLP meets its marching equations only near the optimum, but
-    its earlier iterates' designs are often admissible and good (the 20 x 20 sphere cap:
-    1.29% RMS/diameter after 15 of 40 iterations, 0.75% after 25).
+    its earlier iterates' designs are often admissible and good (docs/solvers.md).
     """
 
     #: constraint violation below which an iterate counts as feasible for ``stop``
@@ -707,11 +909,8 @@ def multistart_starts(problem: DesignProblem, starts: int, seed: int) -> list[tu
     ``starts - 1`` seeded uniform perturbations by :data:`MULTISTART_SPREAD`, clipped to
     alpha0 in [min_angle + 0.05, pi/2 - 0.05] and omega0 inside ``omega_bounds`` (5% of
     their width away from each end)."""
-    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 1:
-        raise InputError(f"multistart must be a whole number of starts >= 1, got {starts!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
-    rng = np.random.default_rng(int(seed))
+    starts, seed = _whole("multistart", starts, 1), _whole("seed", seed, 0)
+    rng = np.random.default_rng(seed)
     lo, hi = problem.omega_bounds
     margin = 0.05 * (hi - lo)
     alpha = np.clip(problem.alpha0 + rng.uniform(-1, 1, starts - 1) * MULTISTART_SPREAD["alpha0"],
@@ -721,47 +920,51 @@ def multistart_starts(problem: DesignProblem, starts: int, seed: int) -> list[tu
     return [(problem.alpha0, problem.omega0)] + [(float(a), float(w)) for a, w in zip(alpha, omega)]
 
 
-def _multistart(problem: DesignProblem, starts: int, seed: int,
-                callback: Callable[[dict], None] | None, warm_start: DesignResult | None,
-                verbose: bool) -> DesignResult:
-    """Solve ``problem`` from each start of :func:`multistart_starts`; keep the best.
+def solve_multistart(problem: DesignProblem, options: SolveOptions, *,
+                     callback: Callable[[dict], None] | None = None,
+                     warm_start: DesignResult | None = None,
+                     verbose: bool = False) -> DesignResult:
+    """Solve ``problem`` from each of the ``options.multistart`` starts of
+    :func:`multistart_starts` (seeded by ``options.seed``); keep the best.
 
     A start that ends in :class:`InfeasibleDesign` or :class:`SolverFailed` is recorded and
-    skipped; the result is the successful start with the smallest fit["rms"], with the
-    problem as asked (``result.problem``) and ``result.stats["multistart"]`` = {"starts",
-    "seed", "chosen" (index of the kept start), "time" (all starts, s), "runs": one entry
-    per start with alpha0, omega0, status, rms (None when it failed), iterations, time and
-    reason}. When every start fails, raises :class:`InfeasibleDesign` if all were
+    skipped; the result is the successful start with the smallest fit.rms, with the
+    problem and options as asked (``result.problem``) and ``result.stats.multistart`` =
+    {"starts", "seed", "chosen" (index of the kept start), "time" (all starts, s), "runs":
+    one entry per start with alpha0, omega0, status, rms (None when it failed), iterations,
+    time and reason}. When every start fails, raises :class:`InfeasibleDesign` if all were
     infeasible, else :class:`SolverFailed` with the status of the first failed solve.
     """
     if warm_start is not None:
         raise InputError("multistart and warm_start exclude each other: a warm start replaces "
                          "the starting Miuras that multistart varies")
     t0 = time.perf_counter()
+    single = replace(options, multistart=1)
     runs: list[dict[str, Any]] = []
     errors: list[InfeasibleDesign | SolverFailed] = []
     best: tuple[int, DesignResult] | None = None
-    for k, (alpha0, omega0) in enumerate(multistart_starts(problem, starts, seed)):
+    for k, (alpha0, omega0) in enumerate(multistart_starts(problem, options.multistart,
+                                                           options.seed)):
         t1 = time.perf_counter()
         run: dict[str, Any] = {"start": k, "alpha0": alpha0, "omega0": omega0}
         try:
-            res = replace(problem, alpha0=alpha0, omega0=omega0).solve(callback=callback,
-                                                                         verbose=verbose)
+            res = replace(problem, alpha0=alpha0, omega0=omega0).solve(
+                single, callback=callback, verbose=verbose)
         except (InfeasibleDesign, SolverFailed) as exc:
             errors.append(exc)
             run.update(status=getattr(exc, "status", "") or "Infeasible_Problem_Detected",
                        rms=None, iterations=None, reason=" ".join(str(exc).split()))
         else:
-            run.update(status=res.stats["status"], rms=res.fit["rms"],
-                       iterations=res.stats["iterations"], reason="")
-            if best is None or res.fit["rms"] < best[1].fit["rms"]:
+            run.update(status=res.stats.status, rms=res.fit.rms,
+                       iterations=res.stats.iterations, reason="")
+            if best is None or res.fit.rms < best[1].fit.rms:
                 best = (k, res)
         run["time"] = time.perf_counter() - t1
         runs.append(run)
     if best is None:
         statuses = ", ".join(sorted({r["status"] for r in runs}))
-        message = (f"all {starts} starts of the multistart failed ({statuses}); the problem's "
-                   f"own start: {errors[0]}")
+        message = (f"all {options.multistart} starts of the multistart failed ({statuses}); "
+                   f"the problem's own start: {errors[0]}")
         failed = [e for e in errors if isinstance(e, SolverFailed)]
         if not failed:
             raise InfeasibleDesign(message) from errors[0]
@@ -769,7 +972,7 @@ def _multistart(problem: DesignProblem, starts: int, seed: int,
                            last_iterate=failed[0].last_iterate,
                            best_iterate=failed[0].best_iterate) from failed[0]
     chosen, res = best
-    stats = dict(res.stats, multistart={"starts": starts, "seed": seed, "chosen": chosen,
-                                        "time": time.perf_counter() - t0, "runs": runs})
-    return replace(res, stats=stats, problem=problem.to_config())
-
+    stats = replace(res.stats, multistart={
+        "starts": options.multistart, "seed": options.seed, "chosen": chosen,
+        "time": time.perf_counter() - t0, "runs": runs})
+    return replace(res, stats=stats, problem=problem.config(options))

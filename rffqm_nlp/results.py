@@ -1,23 +1,116 @@
-"""The outcome of an inverse design: :class:`DesignResult`, with one versioned file format."""
+"""The outcome of an inverse design: :class:`DesignResult` with its typed :class:`Fit` and
+:class:`SolveStats`, and one versioned file format, validated when read."""
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from . import numpy_model
 from .boundary import BoundaryData
-from .errors import InputError
-from .files import atomic_path, jsonable
+from .errors import InputError, RffqmError
+from .files import jsonable, write_json
 from .pattern import Pattern
 
 FORMAT = "rffqm-nlp design result"
-VERSION = 1
+VERSION = 2
 FILENAME = "result.json"
+#: Relative agreement required between a stored array and its recomputation on load.
+REMARCH_RTOL = 1e-9
+#: Keys of a version 1 result's "design" table that version 2 keeps in "solve".
+V1_SOLVE_KEYS = ("continuation", "transcription", "solver", "hessian", "damping", "max_iter",
+                 "tol", "time_limit", "stop_rms", "barrier_init", "ipopt_options")
+
+
+@dataclass(frozen=True)
+class Fit:
+    """How well a design fits its target; lengths relative to the target's diameter.
+
+    * ``rms``: RMS distance of the aligned coarse lattice to the target lattice
+      (corresponding points);
+    * ``rms_surface``, ``hausdorff``: RMS and largest distance of the coarse lattice to the
+      target surface;
+    * ``plane_rms``: RMS distance of the target lattice to its best-fitting plane (the fit a
+      flat sheet reaches, for comparison);
+    * ``min_side_over_mean``: the smallest side length over the mean side length;
+    * ``min_sector_angle``: the smallest sector angle (radians).
+    """
+
+    rms: float
+    rms_surface: float
+    hausdorff: float
+    plane_rms: float
+    min_side_over_mean: float
+    min_sector_angle: float
+
+    def to_dict(self) -> dict[str, float]:
+        """{field: value}, JSON-ready."""
+        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Fit":
+        """Inverse of :meth:`to_dict`; every field must be present."""
+        return cls(**{f.name: float(_required(d, f.name, "fit")) for f in fields(cls)})
+
+    def is_finite(self) -> bool:
+        """Whether every measure is a finite number."""
+        return bool(np.all(np.isfinite(list(self.to_dict().values()))))
+
+
+@dataclass(frozen=True)
+class SolveStats:
+    """How a design was solved.
+
+    * ``status``: the solver's final status ("Solve_Succeeded", "Fit_Reached" when
+      stop_rms was reached, or IPOPT's/the Levenberg-Marquardt solver's failure status);
+      ``success``: whether that status is a success;
+    * ``iterations``: all iterations, of every solver and continuation stage;
+      ``gauss_newton_iterations``: those of IPOPT with the Gauss-Newton Hessian;
+      ``marched_iterations``: those of Levenberg-Marquardt on the marching manifold;
+    * ``build_time``, ``solve_time``: seconds spent building the NLPs and solvers, and the rest;
+    * ``objective``: the final objective (the loss);
+    * ``solver``, ``transcription``, ``hessian``: the options they ran with;
+    * ``history``: per iteration, lists "iter", "objective", "inf_pr" (largest constraint
+      violation) and "elapsed" (seconds since the solve started);
+    * ``multistart``: None, or the record of a multistart (see
+      :func:`rffqm_nlp.design.solve_multistart`).
+    """
+
+    status: str
+    success: bool
+    iterations: int
+    build_time: float
+    solve_time: float
+    objective: float
+    solver: str
+    transcription: str
+    hessian: str
+    gauss_newton_iterations: int = 0
+    marched_iterations: int = 0
+    history: dict[str, list[float]] = field(
+        default_factory=lambda: {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
+    multistart: dict[str, Any] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """{field: value}, JSON-ready (``multistart`` left out when None)."""
+        out = jsonable(asdict(self))
+        if self.multistart is None:
+            out.pop("multistart")
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "SolveStats":
+        """Inverse of :meth:`to_dict`; fields with defaults may be missing."""
+        values = {f.name: d[f.name] for f in fields(cls) if f.name in d}
+        for f in fields(cls):
+            if f.name not in values and f.default is MISSING and f.default_factory is MISSING:
+                _required(d, f.name, "stats")
+        return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -27,13 +120,11 @@ class DesignResult:
     * ``boundary``: the designed boundary data; ``omega``: the designed fold parameter;
     * ``pattern``: the crease pattern re-marched with the NumPy model;
     * ``folded``: (2N+1, 2M+1, 3) vertices at ``omega``, moved rigidly onto the target
-      (``rotation @ y + translation``);
+      (``rotation @ y + translation``); ``rotation`` (3, 3), ``translation`` (3,);
     * ``target_points``: (N+1, M+1, 3) target lattice;
-    * ``fit``: RMS and Hausdorff distances (relative to the target's diameter), the
-      best-fitting plane's RMS for comparison, the smallest side over the mean side and the
-      smallest sector angle;
-    * ``stats``: iterations, build and solve time, IPOPT status, objective history;
-    * ``problem``: the problem's settings (target configuration included) as a dict;
+    * ``fit``: a :class:`Fit`; ``stats``: a :class:`SolveStats`;
+    * ``problem``: {"target", "design", "solve"}: the problem and the options it was solved
+      with, as TOML-ready tables;
     * ``x``: the solver's final design vector (for warm starts).
     """
 
@@ -44,8 +135,8 @@ class DesignResult:
     target_points: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
-    fit: dict[str, float]
-    stats: dict[str, Any]
+    fit: Fit
+    stats: SolveStats
     problem: dict[str, Any] = field(default_factory=dict)
     x: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -61,37 +152,44 @@ class DesignResult:
             "boundary": self.boundary.to_dict(), "omega": self.omega,
             "pattern": self.pattern.to_dict(), "folded": self.folded.tolist(),
             "target_points": self.target_points.tolist(), "rotation": self.rotation.tolist(),
-            "translation": self.translation.tolist(), "fit": self.fit,
-            "stats": jsonable(self.stats), "problem": jsonable(self.problem),
+            "translation": self.translation.tolist(), "fit": self.fit.to_dict(),
+            "stats": self.stats.to_dict(), "problem": jsonable(self.problem),
             "x": np.asarray(self.x).tolist(),
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "DesignResult":
-        """Inverse of :meth:`to_dict`; checks the format and version."""
-        if d.get("format") != FORMAT:
-            raise InputError("not a design result written by rffqm-nlp")
+    def from_dict(cls, d: dict[str, Any], source: str = FILENAME) -> "DesignResult":
+        """Inverse of :meth:`to_dict`: checks the format and version (a version 1 result is
+        migrated, :func:`migrate_v1`), every array's shape and finiteness, and that the
+        pattern and the folded state agree with the boundary data re-marched.
+        ``source`` names the file in the errors."""
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise InputError(f"{source}: not a design result written by rffqm-nlp")
+        if d.get("version") == 1:
+            d = migrate_v1(d)
         if d.get("version") != VERSION:
-            raise InputError(f"design result version {d.get('version')!r} is not supported "
-                             f"(this rffqm-nlp reads version {VERSION})")
-        return cls(
-            boundary=BoundaryData.from_dict(d["boundary"]), omega=float(d["omega"]),
-            pattern=Pattern.from_dict(d["pattern"]), folded=np.asarray(d["folded"]),
-            target_points=np.asarray(d["target_points"]), rotation=np.asarray(d["rotation"]),
-            translation=np.asarray(d["translation"]), fit=dict(d["fit"]),
-            stats=dict(d["stats"]), problem=dict(d["problem"]), x=np.asarray(d["x"]))
+            raise InputError(f"{source}: design result version {d.get('version')!r} is not "
+                             f"supported (this rffqm-nlp reads versions 1 and {VERSION})")
+        try:
+            return _checked(d, source)
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, RffqmError):
+                raise
+            raise InputError(f"{source}: broken design result ({type(exc).__name__}: "
+                             f"{exc})") from None
 
     def save(self, directory: str | os.PathLike) -> Path:
-        """Write ``result.json`` into ``directory`` (created if needed), atomically."""
+        """Write ``result.json`` into ``directory`` (created if needed), atomically; a
+        NaN or inf anywhere is refused (:class:`InputError`) and nothing is written."""
         path = Path(directory) / FILENAME
         path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            tmp.write_text(json.dumps(self.to_dict()))
+        write_json(path, self.to_dict())
         return path
 
     @classmethod
     def load(cls, directory: str | os.PathLike) -> "DesignResult":
-        """Read a result saved by :meth:`save` (a folder, or the ``result.json`` itself)."""
+        """Read a result saved by :meth:`save` (a folder, or the ``result.json`` itself),
+        validated as :meth:`from_dict` says."""
         path = Path(directory)
         if path.is_dir():
             path = path / FILENAME
@@ -102,4 +200,81 @@ class DesignResult:
             raise InputError(f"no design result at {path}") from None
         except json.JSONDecodeError as exc:
             raise InputError(f"{path} is not valid JSON: {exc}") from None
-        return cls.from_dict(data)
+        return cls.from_dict(data, source=str(path))
+
+
+def migrate_v1(d: dict[str, Any]) -> dict[str, Any]:
+    """A version 1 result as version 2: the solve options move from problem["design"] to
+    problem["solve"]."""
+    problem = dict(d.get("problem", {}))
+    design = dict(problem.get("design", {}))
+    solve = {key: design.pop(key) for key in V1_SOLVE_KEYS if key in design}
+    return {**d, "version": 2, "problem": {**problem, "design": design, "solve": solve}}
+
+
+def _checked(d: dict[str, Any], source: str) -> DesignResult:
+    """The result of a version 2 dict, every array checked (see DesignResult.from_dict)."""
+    arrays = {key: _finite(d, key, source) for key in
+              ("omega", "folded", "target_points", "rotation", "translation", "x")}
+    for key in ("left", "bottom", "l_left", "l_bottom"):
+        _finite(_required(d, "boundary", source), key, source, f"boundary.{key}")
+    bd = BoundaryData.from_dict(d["boundary"])
+    pattern_d = _required(d, "pattern", source)
+    stored = {key: _finite(pattern_d, key, source, f"pattern.{key}")
+              for key in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")}
+    N, M = bd.N, bd.M
+    shapes = {"omega": (), "folded": (N + 1, M + 1, 3),
+              "target_points": (N // 2 + 1, M // 2 + 1, 3), "rotation": (3, 3),
+              "translation": (3,), "pattern.alpha": (N + 1, M + 1),
+              "pattern.beta": (N + 1, M + 1), "pattern.sigma": (N + 1, M + 1),
+              "pattern.lh": (N + 1, M), "pattern.lv": (N, M + 1), "pattern.mu": (N, M),
+              "pattern.X": (N + 1, M + 1, 3)}
+    given = {**arrays, **{f"pattern.{k}": v for k, v in stored.items()}}
+    for key, expected in shapes.items():
+        if given[key].shape != expected:
+            raise InputError(f"{source}: {key} has shape {given[key].shape}, expected {expected} "
+                             f"for the boundary's {N} x {M} panels")
+    if arrays["x"].ndim != 1:
+        raise InputError(f"{source}: x must be a flat list of numbers, got shape "
+                         f"{arrays['x'].shape}")
+    pattern = numpy_model.march(bd)
+    for key, value in stored.items():
+        _agree(value, getattr(pattern, key), source,
+               f"pattern.{key} does not match its boundary data re-marched with the NumPy model")
+    omega = float(arrays["omega"])
+    Y = numpy_model.fold(pattern, omega) @ arrays["rotation"].T + arrays["translation"]
+    _agree(arrays["folded"], Y, source, "folded does not match the pattern folded at omega "
+           "and moved by the stored rotation and translation")
+    return DesignResult(
+        boundary=bd, omega=omega, pattern=Pattern(**stored), folded=arrays["folded"],
+        target_points=arrays["target_points"], rotation=arrays["rotation"],
+        translation=arrays["translation"], fit=Fit.from_dict(_required(d, "fit", source)),
+        stats=SolveStats.from_dict(_required(d, "stats", source)),
+        problem=dict(_required(d, "problem", source)), x=arrays["x"])
+
+
+def _required(d: Any, key: str, source: str) -> Any:
+    if not isinstance(d, dict) or key not in d:
+        raise InputError(f"{source}: the key {key!r} is missing")
+    return d[key]
+
+
+def _finite(d: Any, key: str, source: str, name: str | None = None) -> np.ndarray:
+    """d[key] as a float array: a rectangular array of finite numbers, else InputError."""
+    name = name or key
+    try:
+        arr = np.asarray(_required(d, key, source), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: {name} must be a rectangular array of numbers (a cut "
+                         "or ragged array?)") from None
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{source}: {name} holds NaN or inf; every value must be finite")
+    return arr
+
+
+def _agree(stored: np.ndarray, recomputed: np.ndarray, source: str, what: str) -> None:
+    scale = max(float(np.abs(recomputed).max(initial=0.0)), 1e-300)
+    error = float(np.abs(stored - recomputed).max(initial=0.0))
+    if error > REMARCH_RTOL * scale:
+        raise InputError(f"{source}: {what} (off by {error / scale:.3g} relative, allowed "
+                         f"{REMARCH_RTOL:g})")

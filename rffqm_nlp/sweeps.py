@@ -3,13 +3,13 @@
 A :class:`Study` is a base design problem and the parameters to vary. Its TOML file::
 
     base = "../targets/sphere_cap.toml"     # a design file, relative to this file; or inline:
-    [target]                                # [target] / [design] tables (keys here override
-    name = "sphere_cap"                     #   the base file's; setting target.name or
-    [design]                                #   target.python drops the base's target keys)
+    [target]                                # [target] / [design] / [solve] tables (keys here
+    name = "sphere_cap"                     #   override the base file's; setting target.name
+    [design]                                #   or target.python drops the base's target keys)
     panels = [8, 8]
-    [solve]                                 # arguments of DesignProblem.solve
+    [solve]                                 # the SolveOptions, e.g.
+    stop_rms = 0.012                        #   stop at 1.2% of the diameter
     multistart = 1                          #   starts per design (keep the best fit)
-    seed = 0                                #   seed of the multistart perturbations
     [sweep]                                 # dotted keys "<table>.<key>", table one of
     "target.radius" = [3.0, 4.0]            #   target, design, solve: a list of values each
     "design.layout" = ["zigzag_i", "zigzag_j"]   # (the grid is their product);
@@ -43,6 +43,8 @@ study into the same ``OUT`` skips every design whose folder holds a valid, match
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import functools
 import hashlib
 import importlib.util
@@ -63,10 +65,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .design import DesignProblem
+from .design import DesignProblem, SolveOptions
+from .design import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
 from .files import atomic_path, read_toml
-from .results import DesignResult
+from .results import DesignResult, Fit, SolveStats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -75,8 +78,6 @@ if TYPE_CHECKING:
 
 #: Tables a swept key may address ("<table>.<key>").
 TABLES = ("target", "design", "solve")
-#: Keys of the [solve] table (arguments of DesignProblem.solve) and their defaults.
-SOLVE_DEFAULTS: dict[str, int] = {"multistart": 1, "seed": 0}
 #: Top-level keys of a study file.
 STUDY_KEYS = ("base", "description", "target", "design", "solve", "sweep")
 #: Keys of [sweep] that control the expansion rather than name a parameter.
@@ -84,15 +85,14 @@ SWEEP_CONTROLS = ("sample", "seed", "cases")
 #: Keys of a random range {low, high, log}.
 RANGE_KEYS = ("low", "high", "log")
 #: Swept keys that take whole numbers (a range draws whole numbers for them).
-INTEGER_KEYS = ("design.max_iter", "solve.multistart", "solve.seed")
-#: Fit measures copied from DesignResult.fit into the table.
-FIT_COLUMNS = ("rms", "rms_surface", "hausdorff", "plane_rms", "min_side_over_mean",
-               "min_sector_angle")
+INTEGER_KEYS = ("solve.max_iter", "solve.multistart", "solve.seed")
+#: Fit measures copied from DesignResult.fit into the table: the fields of Fit.
+FIT_COLUMNS = tuple(f.name for f in dataclasses.fields(Fit))
 #: Outcome columns of every row, after id, name, case and the swept parameters.
 OUTCOME_COLUMNS = ("status", "solver_status", "reason", *FIT_COLUMNS, "iterations", "start",
                    "build_time", "solve_time", "time", "worker", "host")
 #: Statuses of finished designs that a re-run keeps; "error" and "worker_lost" are retried.
-FINAL_STATUSES = ("solved", "infeasible", "failed")
+KEPT_ROW_STATUSES = ("solved", "infeasible", "failed")
 DESIGNS_DIR = "designs"
 ROW_FILE = "row.json"
 TABLE_NAME = "results"
@@ -231,11 +231,11 @@ class Study:
                 raise InputError(f"base = {config['base']!r}: no such design file "
                                  f"{base_path} (paths are relative to the study file)")
             base_file = read_toml(base_path, "base file")
-            extra = set(base_file) - {"target", "design"}
+            extra = set(base_file) - set(TABLES)
             if extra:
                 raise InputError(f"base file {base_path} has table(s) {sorted(extra)}; a "
-                                 "design file has [target] and [design]")
-            for table in ("target", "design"):
+                                 "design file has [target], [design] and [solve]")
+            for table in TABLES:
                 base[table].update(base_file.get(table, {}))
         for table in TABLES:
             inline = config.get(table, {})
@@ -342,7 +342,8 @@ class Study:
 def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
                   name: str = "design") -> dict[str, Any]:
     """The full configuration {"target", "design", "solve"} of ``base`` with the dotted
-    ``overrides`` applied, every default filled in (via :class:`DesignProblem`), validated.
+    ``overrides`` applied, every default filled in (via :class:`DesignProblem` and
+    :class:`SolveOptions`), validated.
 
     Setting target.name or target.python starts the target table afresh; an integer p as
     design.panels means (p, p).
@@ -357,14 +358,12 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
     if isinstance(panels, int) and not isinstance(panels, bool):
         tables["design"]["panels"] = [panels, panels]
     try:
-        problem = DesignProblem.from_config({"target": tables["target"],
-                                             "design": tables["design"]})
-        solve = _solve_settings(tables["solve"])
+        problem, options = problem_from_config(tables)
     except InputError as exc:
         raise InputError(f"design {name!r}: {exc}") from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"design {name!r}: bad value ({type(exc).__name__}: {exc})") from None
-    return {**problem.to_config(), "solve": solve}
+    return problem.config(options)
 
 
 def design_id(config: Mapping[str, Any]) -> str:
@@ -391,10 +390,9 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
     row: dict[str, Any] = {"worker": _worker_name(), "host": socket.gethostname()}
     result = None
     try:
-        problem = DesignProblem.from_config({"target": config["target"],
-                                             "design": config["design"]})
+        problem, options = problem_from_config(config)
         with one_thread():
-            result = problem.solve(**config["solve"])
+            result = problem.solve(options)
     except InfeasibleDesign as exc:
         row.update(status="infeasible", solver_status="Infeasible_Problem_Detected",
                    reason=one_line(exc))
@@ -405,22 +403,19 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
         row.update(status="error", solver_status="",
                    reason=f"{type(exc).__name__}: {one_line(exc)}")
     else:
-        fit = {k: float(result.fit[k]) for k in FIT_COLUMNS}
-        bad = [k for k, v in fit.items() if not math.isfinite(v)]
-        if bad:
-            row.update(status="error", solver_status=result.stats["status"],
-                       reason=f"non-finite fit measure(s) {', '.join(bad)} of a solved design")
-            result = None
-        else:
-            row.update(status="solved", solver_status=result.stats["status"], reason="", **fit,
-                       **_stat_columns(result.stats),
-                       start=result.stats.get("multistart", {}).get("chosen", 0))
+        multistart = result.stats.multistart or {}
+        row.update(status="solved", solver_status=result.stats.status, reason="",
+                   **result.fit.to_dict(), **_stat_columns(result.stats),
+                   start=multistart.get("chosen", 0))
     row["time"] = time.perf_counter() - t0
     return {"row": row, "result": None if result is None else result.to_dict()}
 
 
-def _stat_columns(stats: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: stats[k] for k in ("iterations", "build_time", "solve_time") if k in stats}
+def _stat_columns(stats: SolveStats | None) -> dict[str, Any]:
+    if not isinstance(stats, SolveStats):
+        return {}
+    return {"iterations": stats.iterations, "build_time": stats.build_time,
+            "solve_time": stats.solve_time}
 
 
 def one_thread() -> AbstractContextManager:
@@ -688,18 +683,17 @@ def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
         row = {column: record["row"][column] for column in OUTCOME_COLUMNS}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
-    if row["status"] not in FINAL_STATUSES:
+    if row["status"] not in KEPT_ROW_STATUSES:
         return None
     if row["status"] == "solved":
         try:
             result = DesignResult.load(folder)
         except (RffqmError, OSError, KeyError, TypeError, ValueError, AttributeError):
             return None
-        problem = {k: design.config[k] for k in ("target", "design")}
         N, M = design.config["design"]["panels"]
-        if (_canonical(result.problem) != _canonical(problem)
+        if (_canonical(result.problem) != _canonical(design.config)
                 or result.folded.shape != (N + 1, M + 1, 3)
-                or any(result.fit.get(k) != row[k] for k in FIT_COLUMNS)):
+                or result.fit.to_dict() != {k: row[k] for k in FIT_COLUMNS}):
             return None
     return row
 
@@ -758,12 +752,20 @@ def _check_key(key: str, where: str = "[sweep]") -> None:
         raise InputError(f"{where}: {key!r} is not a parameter; name one as "
                          f"\"<table>.<key>\" with table one of {', '.join(TABLES)} (e.g. "
                          "\"target.radius\", \"design.panels\", \"solve.seed\")")
-    if table == "design" and item not in DesignProblem.__dataclass_fields__:
-        known = sorted(set(DesignProblem.__dataclass_fields__) - {"target"})
-        raise InputError(f"{where}: unknown design key {item!r}; known: {', '.join(known)}")
-    if table == "solve" and item not in SOLVE_DEFAULTS:
-        raise InputError(f"{where}: unknown solve key {item!r}; known: "
-                         f"{', '.join(SOLVE_DEFAULTS)}")
+    known = {"design": [f.name for f in dataclasses.fields(DesignProblem)
+                        if f.name != "target"],
+             "solve": _solve_keys()}.get(table)
+    if known is not None and item not in known:
+        close = difflib.get_close_matches(item, known, n=1)
+        hint = f"did you mean {table}.{close[0]}?" if close else f"known: {', '.join(known)}"
+        if table == "design" and item in _solve_keys():
+            hint = f"it is a solve option: sweep \"solve.{item}\""
+        raise InputError(f"{where}: unknown {table} key {item!r}; {hint}")
+
+
+def _solve_keys() -> list[str]:
+    """The keys of a [solve] table: the fields of SolveOptions."""
+    return [f.name for f in dataclasses.fields(SolveOptions)]
 
 
 def _dotted(table: Mapping[str, Any], where: str) -> Iterator[tuple[str, Any]]:
@@ -792,22 +794,6 @@ def _range_or_list(key: str, value: Any) -> list | Range:
         except InputError as exc:
             raise InputError(f"[sweep] {key}: {exc}") from None
     return value
-
-
-def _solve_settings(table: Mapping[str, Any]) -> dict[str, int]:
-    unknown = set(table) - set(SOLVE_DEFAULTS)
-    if unknown:
-        raise InputError(f"unknown [solve] key(s) {sorted(unknown)}; known: "
-                         f"{', '.join(SOLVE_DEFAULTS)}")
-    settings = {**SOLVE_DEFAULTS, **table}
-    if isinstance(settings["multistart"], bool) or not isinstance(settings["multistart"], int) \
-            or settings["multistart"] < 1:
-        raise InputError(f"solve.multistart must be a whole number >= 1, got "
-                         f"{settings['multistart']!r}")
-    if isinstance(settings["seed"], bool) or not isinstance(settings["seed"], int) \
-            or settings["seed"] < 0:
-        raise InputError(f"solve.seed must be a whole number >= 0, got {settings['seed']!r}")
-    return settings
 
 
 def _short_names(keys: list[str]) -> dict[str, str]:

@@ -32,6 +32,9 @@ radius = 4.0
 [design]
 panels = [8, 8]
 {extra}
+
+[solve]
+{solve}
 """
 DESIGN_FILES = {"result.json", "pattern.fold", "crease.svg", "crease.pdf", "crease.dxf",
                 "folded.obj", "folded.glb", "convergence.png"}
@@ -61,9 +64,10 @@ def assert_user_error(res, *fragments: str) -> str:
     return errors[0]
 
 
-def write_toml(folder: Path, name: str, extra: str = "") -> Path:
+def write_toml(folder: Path, name: str, extra: str = "", solve: str = "") -> Path:
+    """A design file of SMALL with ``extra`` [design] and ``solve`` [solve] lines."""
     path = folder / name
-    path.write_text(SMALL.format(extra=extra))
+    path.write_text(SMALL.format(extra=extra, solve=solve))
     return path
 
 
@@ -106,12 +110,12 @@ def test_design_writes_every_file(designed, result):
     if not rendering:
         assert "warning" in res.output and reason.split()[0] in res.output
 
-    assert result.stats["success"] and result.pattern.N == 8 and result.pattern.M == 8
-    assert result.fit["rms"] < result.fit["plane_rms"]
+    assert result.stats.success and result.pattern.N == 8 and result.pattern.M == 8
+    assert result.fit.rms < result.fit.plane_rms
     pat, omega, meta = foldfile.read_fold(out / "pattern.fold")
     assert omega == pytest.approx(result.omega)
     np.testing.assert_allclose(pat.X, result.pattern.X)
-    assert meta["target"]["name"] == "sphere_cap" and meta["fit"] == result.fit
+    assert meta["target"]["name"] == "sphere_cap" and meta["fit"] == result.fit.to_dict()
     frames = json.loads((out / "pattern.fold").read_text())["file_frames"]
     assert len(frames) == 24
     assert frames[0]["rffqm:omega"] == 0.0
@@ -133,8 +137,8 @@ def test_design_writes_every_file(designed, result):
 def test_design_panels_two_words_and_progress_lines(tmp_path, monkeypatch):
     seen = {}
 
-    def failing(self, callback=None, **kw):
-        seen["panels"], seen["max_iter"] = self.panels, self.max_iter
+    def failing(self, options, callback=None, **kw):
+        seen["panels"], seen["max_iter"] = self.panels, options.max_iter
         if callback is not None:
             callback({"iter": 0, "objective": 1.0, "inf_pr": 0.5, "elapsed": 0.0})
         raise SolverFailed("IPOPT did not converge: status Stop_Here", status="Stop_Here")
@@ -145,14 +149,14 @@ def test_design_panels_two_words_and_progress_lines(tmp_path, monkeypatch):
         res = invoke("design", toml, *panels, "--max-iter", "7", "--out", tmp_path / "o")
         assert_user_error(res, "Stop_Here")
         assert seen == {"panels": (4, 6), "max_iter": 7}
-        assert "IPOPT iteration 0" in res.output       # the plain progress line (no terminal)
+        assert "Levenberg-Marquardt iteration 0" in res.output  # plain progress (no terminal)
     res = invoke("design", "--panels", "6", "4", toml, "--out", tmp_path / "o", "--quiet")
     assert_user_error(res, "Stop_Here")
-    assert seen["panels"] == (6, 4) and "IPOPT iteration" not in res.output
+    assert seen["panels"] == (6, 4) and "Levenberg-Marquardt iteration" not in res.output
     assert not (tmp_path / "o").exists() and leftovers(tmp_path) == []
-    lm = write_toml(tmp_path, "lm.toml", 'solver = "levenberg-marquardt"')
-    res = invoke("design", lm, "--out", tmp_path / "o")
-    assert "Levenberg-Marquardt iteration 0" in res.output
+    ipopt = write_toml(tmp_path, "ipopt.toml", solve='solver = "ipopt"')
+    res = invoke("design", ipopt, "--out", tmp_path / "o")
+    assert "IPOPT iteration 0" in res.output
 
 
 def test_design_without_rendering_warns_and_force_replaces_the_folder(tmp_path, fake_solve,
@@ -336,7 +340,7 @@ def test_design_infeasible(tmp_path):
 
 
 def test_design_solver_failure_names_status(tmp_path):
-    res = invoke("design", write_toml(tmp_path, "t.toml", "max_iter = 1"),
+    res = invoke("design", write_toml(tmp_path, "t.toml", solve="max_iter = 1"),
                  "--out", tmp_path / "o", "--quiet")
     line = assert_user_error(res, "Maximum_Iterations_Exceeded")
     assert res.output.strip() == line.strip()

@@ -10,29 +10,36 @@ from hypothesis import given, settings, strategies as st
 import rffqm_nlp as rq
 from rffqm_nlp import design, numpy_model, surfaces, transcription
 from rffqm_nlp import vertex as vx
-from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.results import DesignResult
 
 TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
 
 
-def small(name: str, **kw) -> DesignProblem:
-    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_reduced.py)."""
-    return replace(DesignProblem.load(f"targets/{name}.toml"),
-                   **{"panels": (8, 8), "stop_rms": None, "solver": "ipopt", **kw})
+PROBLEM_FIELDS = set(DesignProblem.__dataclass_fields__)
+
+
+def small(name: str, **kw) -> tuple[DesignProblem, SolveOptions]:
+    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_reduced.py);
+    ``kw`` sets DesignProblem and SolveOptions fields."""
+    problem, options = rq.load_design(f"targets/{name}.toml")
+    return (replace(problem, **{"panels": (8, 8), **{k: v for k, v in kw.items()
+                                                     if k in PROBLEM_FIELDS}}),
+            replace(options, **{"stop_rms": None, "solver": "ipopt",
+                                **{k: v for k, v in kw.items() if k not in PROBLEM_FIELDS}}))
 
 
 @pytest.fixture(scope="module", params=[(name, tr) for name in TARGETS
                                         for tr in ("simultaneous", "sequential")])
 def solved(request):
     name, transcription = request.param
-    prob = small(name, transcription=transcription)
-    return prob, prob.solve()
+    prob, opts = small(name, transcription=transcription)
+    return prob, opts, prob.solve(opts)
 
 
 def test_small_designs_converge_with_constraints_and_fit(solved):
-    prob, res = solved
-    assert res.stats["success"] and res.stats["status"] == "Solve_Succeeded"
+    prob, _, res = solved
+    assert res.stats.success and res.stats.status == "Solve_Succeeded"
     # Inline constraints hold on the independent NumPy re-march.
     pat = numpy_model.march(res.boundary)
     angles = np.concatenate([pat.alpha.ravel(), pat.beta.ravel()])
@@ -57,37 +64,39 @@ def test_small_designs_converge_with_constraints_and_fit(solved):
     np.testing.assert_allclose(Y, res.folded, atol=1e-8 * np.abs(Y).max())
     assert res.folded.shape == (9, 9, 3) and res.target_points.shape == (5, 5, 3)
     # Much better than the flat start and than the best plane.
-    assert res.fit["rms"] < 0.25 * res.fit["plane_rms"]
-    assert res.fit["rms"] < 0.02
-    assert res.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
-    assert res.fit["min_sector_angle"] >= prob.min_angle - 1e-6
+    assert res.fit.rms < 0.25 * res.fit.plane_rms
+    assert res.fit.rms < 0.02
+    assert res.fit.min_side_over_mean >= prob.min_length * (1 - 1e-6)
+    assert res.fit.min_sector_angle >= prob.min_angle - 1e-6
 
 
 def test_result_save_load_round_trip(solved, tmp_path):
-    _, res = solved
+    _, _, res = solved
     res.save(tmp_path / "run")
     back = DesignResult.load(tmp_path / "run")
     assert back.omega == res.omega and back.fit == res.fit
     np.testing.assert_array_equal(back.folded, res.folded)
     np.testing.assert_array_equal(back.boundary.to_vector(), res.boundary.to_vector())
     np.testing.assert_array_equal(back.pattern.X, res.pattern.X)
-    assert back.stats["iterations"] == res.stats["iterations"]
-    assert DesignProblem.from_config(back.problem).to_config() == res.problem
+    assert back.stats.iterations == res.stats.iterations
+    assert back.stats == res.stats and back.problem == res.problem
+    problem, options = rq.design.from_config(back.problem)
+    assert problem.config(options) == res.problem
 
 
 def test_warm_start_from_a_solution_returns_to_it(solved):
-    prob, res = solved
-    again = prob.solve(warm_start=res)
-    assert again.stats["success"]
+    prob, opts, res = solved
+    again = prob.solve(opts, warm_start=res)
+    assert again.stats.success
     # The loss is flat near its minimisers: IPOPT stops within 1% of the first objective.
-    assert again.stats["objective"] == pytest.approx(res.stats["objective"], rel=1e-2)
-    assert again.stats["iterations"] < res.stats["iterations"]
+    assert again.stats.objective == pytest.approx(res.stats.objective, rel=1e-2)
+    assert again.stats.iterations < res.stats.iterations
     with pytest.raises(rq.InputError, match="panels"):
-        replace(prob, panels=(10, 10)).transcribe(initial=res)
+        replace(prob, panels=(10, 10)).transcribe(initial=res, options=opts)
 
 
 def test_start_matches_target_spacing():
-    prob = small("sphere_cap")
+    prob, _ = small("sphere_cap")
     st = prob.start()
     coarse = numpy_model.fold(numpy_model.march(st.boundary), st.omega)[::2, ::2]
     mine = surfaces.mean_neighbour_distances(coarse)
@@ -98,7 +107,8 @@ def test_start_matches_target_spacing():
 @pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
 def test_nlp_derivatives_match_finite_differences(transcription):
     """Gradient, constraint Jacobian and the Hessian of the Lagrangian IPOPT uses."""
-    nlp = small("hyperboloid", transcription=transcription).transcribe()
+    prob, opts = small("hyperboloid", transcription=transcription)
+    nlp = prob.transcribe(options=opts)
     f = 0.5 * ca.sumsqr(nlp.residuals)
     lam = ca.MX.sym("lam", nlp.g.numel())
     lagrangian_grad = ca.gradient(f + ca.dot(lam, nlp.g), nlp.x)
@@ -129,8 +139,8 @@ def test_nlp_derivatives_match_finite_differences(transcription):
 
 @pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
 def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
-    prob = small("quarter_vase", hessian="gauss-newton", transcription=transcription)
-    nlp = prob.transcribe()
+    prob, opts = small("quarter_vase", hessian="gauss-newton", transcription=transcription)
+    nlp = prob.transcribe(options=opts)
     x = nlp.x0 + 1e-3 * np.random.default_rng(2).normal(size=nlp.x0.size)
     res = ca.Function("r", [nlp.x], [nlp.residuals])
     h, eye = 1e-6, np.eye(x.size)
@@ -142,31 +152,31 @@ def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
         expected = np.triu(0.7 * (J.T @ J + damping * np.diag(nlp.damping_weights)))
         np.testing.assert_allclose(np.array(ca.densify(H).full()), expected,
                                    atol=1e-6 * np.abs(expected).max())
-    out = prob.solve()
-    assert out.stats["success"] and out.stats["hessian"] == "gauss-newton"
-    assert out.fit["rms"] < 0.25 * out.fit["plane_rms"] and out.fit["rms"] < 0.02
+    out = prob.solve(opts)
+    assert out.stats.success and out.stats.hessian == "gauss-newton"
+    assert out.fit.rms < 0.25 * out.fit.plane_rms and out.fit.rms < 0.02
 
 
 def test_gauss_newton_hands_over_to_the_exact_hessian_unless_it_is_done():
-    phases = small("sphere_cap", hessian="gauss-newton")._phases
+    phases = small("sphere_cap", hessian="gauss-newton")[1].ipopt_phases
     n = design.GAUSS_NEWTON_ITERATIONS
     assert phases(0) == [("gauss-newton", n), ("exact", 1000 - n)]
     assert phases(1000 - n + 5) == [("gauss-newton", n - 5)]
-    assert small("sphere_cap", hessian="exact")._phases(10) == [("exact", 990)]
+    assert small("sphere_cap", hessian="exact")[1].ipopt_phases(10) == [("exact", 990)]
     # To IPOPT's tolerance: Gauss-Newton first, then the exact Hessian to the same optimum.
-    exact = small("quarter_vase", hessian="exact").solve()
-    both = small("quarter_vase", hessian="gauss-newton").solve()
-    assert both.stats["status"] == "Solve_Succeeded"
-    assert 0 < both.stats["gauss_newton_iterations"] < both.stats["iterations"]
-    assert np.all(np.diff(both.stats["history"]["elapsed"]) > 0)  # one clock for both runs
+    exact = solve(*small("quarter_vase", hessian="exact"))
+    both = solve(*small("quarter_vase", hessian="gauss-newton"))
+    assert both.stats.status == "Solve_Succeeded"
+    assert 0 < both.stats.gauss_newton_iterations < both.stats.iterations
+    assert np.all(np.diff(both.stats.history["elapsed"]) > 0)  # one clock for both runs
     # the same optimal loss, to IPOPT's tolerance (the runs end at different barrier
     # parameters, and the optimum is flat enough that the folded states differ by 0.5%)
-    assert both.stats["objective"] == pytest.approx(exact.stats["objective"], rel=1e-4)
-    assert both.fit["rms"] == pytest.approx(exact.fit["rms"], rel=1e-2)
+    assert both.stats.objective == pytest.approx(exact.stats.objective, rel=1e-4)
+    assert both.fit.rms == pytest.approx(exact.fit.rms, rel=1e-2)
     # stop_rms reached by Gauss-Newton alone: no exact run.
-    fit = small("hyperboloid", hessian="gauss-newton", stop_rms=0.01).solve()
-    assert fit.stats["status"] == "Fit_Reached" and fit.fit["rms"] <= 0.01
-    assert fit.stats["gauss_newton_iterations"] == fit.stats["iterations"]
+    fit = solve(*small("hyperboloid", hessian="gauss-newton", stop_rms=0.01))
+    assert fit.stats.status == "Fit_Reached" and fit.fit.rms <= 0.01
+    assert fit.stats.gauss_newton_iterations == fit.stats.iterations
 
 
 @settings(max_examples=50, deadline=None)
@@ -188,22 +198,26 @@ def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd):
 
 def test_forced_failure_raises_solver_failed_with_status():
     with pytest.raises(rq.SolverFailed, match="Maximum_Iterations_Exceeded") as exc:
-        small("sphere_cap", max_iter=1, tol=1e-12).solve()
+        solve(*small("sphere_cap", max_iter=1, tol=1e-12))
     assert exc.value.status == "Maximum_Iterations_Exceeded"
-    assert exc.value.last_iterate.size == small("sphere_cap").transcribe().x0.size
+    assert exc.value.last_iterate.size == small("sphere_cap")[0].transcribe().x0.size
 
 
 def test_failure_carries_the_best_feasible_iterate():
     # sequential: its iterates become feasible early, so a later one beats the start (the
     # simultaneous NLP's infeasible path meets its constraints only near the optimum)
-    problem = small("sphere_cap", max_iter=4, tol=1e-12, transcription="sequential")
+    problem, opts = small("sphere_cap", max_iter=4, tol=1e-12, transcription="sequential")
     with pytest.raises(rq.SolverFailed) as exc:
-        problem.solve()
-    best, history = exc.value.best_iterate, exc.value.stats["history"]
-    f = admissible_objective(problem.transcribe(), best)
+        problem.solve(opts)
+    best, history = exc.value.best_iterate, exc.value.stats.history
+    f = admissible_objective(problem.transcribe(options=opts), best)
     feasible = [o for o, v in zip(history["objective"], history["inf_pr"]) if v <= 1e-9]
     assert f == pytest.approx(min(feasible), rel=1e-12)
     assert f < history["objective"][0]
+
+
+def solve(problem: DesignProblem, options: SolveOptions) -> DesignResult:
+    return problem.solve(options)
 
 
 def admissible_objective(nlp: transcription.NLP, x: np.ndarray) -> float:
@@ -218,16 +232,16 @@ def admissible_objective(nlp: transcription.NLP, x: np.ndarray) -> float:
 def test_simultaneous_failure_carries_the_best_remarched_design():
     # Its iterates break the marching equations, but their boundary data, re-marched, are
     # admissible designs: the best of those is carried.
-    problem = small("sphere_cap", max_iter=4, tol=1e-12)
+    problem, opts = small("sphere_cap", max_iter=4, tol=1e-12)
     with pytest.raises(rq.SolverFailed) as exc:
-        problem.solve()
-    best, history = exc.value.best_iterate, exc.value.stats["history"]
+        problem.solve(opts)
+    best, history = exc.value.best_iterate, exc.value.stats.history
     assert max(history["inf_pr"][1:]) > 1e-6  # the path is infeasible
-    assert admissible_objective(problem.transcribe(), best) < history["objective"][0]
+    assert admissible_objective(problem.transcribe(options=opts), best) < history["objective"][0]
 
 
 def test_projection_remarches_the_boundary_data_of_any_iterate():
-    prob = small("quarter_vase")
+    prob, _ = small("quarter_vase")
     nlp = prob.transcribe()
     rng = np.random.default_rng(1)
     x = nlp.x0 + 1e-3 * rng.standard_normal(nlp.x0.size)  # off the marching equations
@@ -260,7 +274,7 @@ def test_projection_remarches_the_boundary_data_of_any_iterate():
 
 def test_unreachable_min_length_reports_infeasibility():
     with pytest.raises(rq.InfeasibleDesign, match="min_length"):
-        small("sphere_cap", min_length=1.5).solve()
+        solve(*small("sphere_cap", min_length=1.5))
 
 
 @pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
@@ -269,11 +283,11 @@ def test_damping_weights_count_lengths_in_spacings_and_follow_the_target_size(tr
     quaternions; a target 10x larger divides the length weights by 100 and keeps the rest."""
     weights = []
     for radius in (4.0, 40.0):
-        prob = small("sphere_cap", transcription=transcription,
-                     target=rq.surfaces.get("sphere_cap", radius=radius,
-                                            domain=((-0.6, 0.6), (-0.6, 0.6))))
+        prob, opts = small("sphere_cap", transcription=transcription,
+                           target=rq.surfaces.get("sphere_cap", radius=radius,
+                                                  domain=((-0.6, 0.6), (-0.6, 0.6))))
         start = prob.start()
-        nlp = prob.transcribe(start)
+        nlp = prob.transcribe(start, options=opts)
         D = nlp.damping_weights
         n = start.target_points.shape[0] * start.target_points.shape[1]
         assert D.shape == nlp.x0.shape
@@ -291,7 +305,12 @@ def test_damping_weights_count_lengths_in_spacings_and_follow_the_target_size(tr
                                 {"fix": ("everything",)}, {"weights": {"shape": 1.0}},
                                 {"omega0": 3.5}, {"alpha0": 2.0}, {"min_angle": 1.0},
                                 {"damping": -0.1}, {"damping": float("inf")},
-                                {"damping": float("nan")}])
+                                {"damping": float("nan")},
+                                {"weights": {"position": float("nan")}},
+                                {"weights": {"forms": float("inf")}}, {"alpha0": float("nan")},
+                                {"min_length": float("inf")}, {"stop_rms": float("nan")},
+                                {"continuation": (1.0, float("nan"))}, {"panels": 4},
+                                {"tol": "small"}, {"max_iter": 2.5}])
 def test_invalid_options_raise_input_error(kw):
     with pytest.raises(rq.InputError):
         small("sphere_cap", **kw)
@@ -301,8 +320,8 @@ def test_invalid_options_raise_input_error(kw):
     ({"no_such_option": 1}, "No such IPOPT option: no_such_option"),
     ({"mu_strategy": "fastest"}, "Invalid options"),
     ({"bound_mult_init_val": -1.0}, "Invalid options"),
-    ({"ipopt.tol": 1e-3}, "through DesignProblem's tol"),
-    ({"max_wall_time": 10.0}, "through DesignProblem's time_limit"),
+    ({"ipopt.tol": 1e-3}, "through SolveOptions' tol"),
+    ({"max_wall_time": 10.0}, "through SolveOptions' time_limit"),
     ({"warm_start_init_point": True}, "'yes' or 'no'"),
     ("mu_init=1e-3", "must be a dict")])
 def test_invalid_ipopt_options_are_refused_when_the_problem_is_made(options, match):
@@ -312,23 +331,24 @@ def test_invalid_ipopt_options_are_refused_when_the_problem_is_made(options, mat
 
 def test_ipopt_options_reach_ipopt_and_survive_the_config_round_trip(tmp_path):
     log = tmp_path / "ipopt.out"
-    prob = small("hyperboloid", stop_rms=0.02, ipopt_options={
+    prob, opts = small("hyperboloid", stop_rms=0.02, ipopt_options={
         "ipopt.output_file": str(log), "file_print_level": 6, "bound_mult_init_val": 0.01})
-    assert prob.ipopt_options == {"output_file": str(log), "file_print_level": 6,
+    assert opts.ipopt_options == {"output_file": str(log), "file_print_level": 6,
                                   "bound_mult_init_val": 0.01}
-    assert DesignProblem.from_config(prob.to_config()).to_config() == prob.to_config()
+    config = prob.config(opts)
+    assert rq.design.from_config(config)[0].config(rq.design.from_config(config)[1]) == config
     toml = tmp_path / "design.toml"
-    toml.write_text('[target]\nname = "hyperboloid"\n[design.ipopt_options]\n'
+    toml.write_text('[target]\nname = "hyperboloid"\n[solve.ipopt_options]\n'
                     'bound_mult_init_method = "mu-based"\n')
-    assert DesignProblem.load(toml).ipopt_options == {"bound_mult_init_method": "mu-based"}
-    res = prob.solve()
+    assert rq.load_design(toml)[1].ipopt_options == {"bound_mult_init_method": "mu-based"}
+    res = prob.solve(opts)
     text = log.read_text()
     assert "bound_mult_init_val = 0.01" in text  # IPOPT's list of the options it used
-    assert text.count("Number of trial factorizations performed") >= res.stats["iterations"]
+    assert text.count("Number of trial factorizations performed") >= res.stats.iterations
 
 
 def test_fixed_groups_stay_at_start():
-    prob = small("sphere_cap", fix=("lengths", "omega"), max_iter=30, tol=1e-2)
+    prob, _ = small("sphere_cap", fix=("lengths", "omega"), max_iter=30, tol=1e-2)
     nlp = prob.transcribe()
     for g in ("lengths", "omega"):
         np.testing.assert_array_equal(nlp.lbx[nlp.groups[g]], nlp.ubx[nlp.groups[g]])
@@ -338,7 +358,8 @@ def test_fixed_groups_stay_at_start():
 def test_progress_callback_receives_every_iteration():
     seen = []
     with pytest.raises(rq.SolverFailed):
-        small("sphere_cap", max_iter=3, tol=1e-12).solve(callback=seen.append)
+        prob, opts = small("sphere_cap", max_iter=3, tol=1e-12)
+        prob.solve(opts, callback=seen.append)
     assert [s["iter"] for s in seen] == list(range(len(seen))) and len(seen) >= 3
     assert all(np.isfinite(s["objective"]) and s["inf_pr"] >= 0 for s in seen)
 
@@ -347,9 +368,9 @@ def test_progress_callback_receives_every_iteration():
 def test_transcriptions_state_the_same_problem_at_the_start(layout):
     # zigzag_j has sigma = -1 vertices with alpha + beta > pi, where the simultaneous crease
     # quaternions are those of the marching times -1 (transcription._crease_quaternion_signs).
-    prob = small("quarter_vase", layout=layout, transcription="sequential")
-    seq = prob.transcribe()
-    sim = replace(prob, transcription="simultaneous").transcribe()
+    prob, opts = small("quarter_vase", layout=layout, transcription="sequential")
+    seq = prob.transcribe(options=opts)
+    sim = prob.transcribe(options=replace(opts, transcription="simultaneous"))
 
     def evaluate(nlp):
         F = ca.Function("F", [nlp.x], [nlp.residuals, nlp.g, *nlp.folded.call([nlp.x])])
@@ -364,7 +385,8 @@ def test_transcriptions_state_the_same_problem_at_the_start(layout):
     assert np.all(g2 >= sim.lbg - 1e-10) and np.all(g2 <= sim.ubg + 1e-10)
     assert np.all(g1 >= seq.lbg - 1e-10) and np.all(g1 <= seq.ubg + 1e-10)
     # Fixing a group pins the same boundary data in both.
-    fixed = replace(prob, transcription="simultaneous", fix=("lengths",)).transcribe()
+    fixed = replace(prob, fix=("lengths",)).transcribe(
+        options=replace(opts, transcription="simultaneous"))
     idx = fixed.groups["lengths"]
     np.testing.assert_array_equal(fixed.lbx[idx], fixed.ubx[idx])
     np.testing.assert_allclose(fixed.x0[idx], prob.start().boundary.lengths)
@@ -372,27 +394,27 @@ def test_transcriptions_state_the_same_problem_at_the_start(layout):
 
 @pytest.mark.parametrize("name", ["sphere_cap", "quarter_vase"])
 def test_transcriptions_reach_the_same_optimum(name):
-    prob = small(name, tol=1e-9, transcription="sequential")
-    seq = prob.solve()
-    sim = replace(prob, transcription="simultaneous").solve()
-    assert sim.stats["transcription"] == "simultaneous"
-    assert sim.stats["objective"] == pytest.approx(seq.stats["objective"], rel=1e-6)
+    prob, opts = small(name, tol=1e-9, transcription="sequential")
+    seq = prob.solve(opts)
+    sim = prob.solve(opts, transcription="simultaneous")
+    assert sim.stats.transcription == "simultaneous"
+    assert sim.stats.objective == pytest.approx(seq.stats.objective, rel=1e-6)
     np.testing.assert_allclose(sim.folded[::2, ::2], seq.folded[::2, ::2],
                                atol=1e-4 * prob.target.diameter())
-    assert sim.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
+    assert sim.fit.min_side_over_mean >= prob.min_length * (1 - 1e-6)
 
 
 @pytest.mark.parametrize("transcription", ["sequential", "simultaneous"])
 def test_stop_rms_stops_early_at_a_feasible_fit(transcription):
     # the simultaneous NLP stops at a re-marched iterate (see the test above)
-    prob = small("sphere_cap", transcription=transcription)
-    full = prob.solve()
-    goal = 1.2 * full.fit["rms"]
-    early = replace(prob, stop_rms=goal).solve()
-    assert early.stats["status"] == "Fit_Reached"
-    assert early.fit["rms"] <= goal + 1e-12
-    assert early.stats["iterations"] < full.stats["iterations"]
-    assert early.fit["min_side_over_mean"] >= prob.min_length * (1 - 1e-6)
+    prob, opts = small("sphere_cap", transcription=transcription)
+    full = prob.solve(opts)
+    goal = 1.2 * full.fit.rms
+    early = prob.solve(opts, stop_rms=goal)
+    assert early.stats.status == "Fit_Reached"
+    assert early.fit.rms <= goal + 1e-12
+    assert early.stats.iterations < full.stats.iterations
+    assert early.fit.min_side_over_mean >= prob.min_length * (1 - 1e-6)
 
 
 @pytest.mark.slow
@@ -401,10 +423,11 @@ def test_bundled_targets_meet_the_fit_goal_at_20x20(name):
     """The goal of the inverse design: at 20 x 20 panels with the bundled settings, the
     aligned coarse lattice is within 1% of the diameter (RMS) and within a quarter of the
     best plane's RMS. About a minute each; run with ``pytest -m slow``."""
-    res = DesignProblem.load(f"targets/{name}.toml").solve()
-    assert res.fit["rms"] <= 0.01
-    assert res.fit["rms"] <= 0.25 * res.fit["plane_rms"]
-    assert res.fit["min_side_over_mean"] >= 0.2 * (1 - 1e-6)
+    problem, options = rq.load_design(f"targets/{name}.toml")
+    res = problem.solve(options)
+    assert res.fit.rms <= 0.01
+    assert res.fit.rms <= 0.25 * res.fit.plane_rms
+    assert res.fit.min_side_over_mean >= 0.2 * (1 - 1e-6)
 
 
 def test_smoothness_residuals_vanish_on_affine_perturbations_and_measure_kinks():
@@ -427,12 +450,13 @@ def test_smoothness_residuals_vanish_on_affine_perturbations_and_measure_kinks()
 
 
 def test_smoothness_weight_enters_the_objective():
-    plain = small("sphere_cap", transcription="sequential")  # x starts with the boundary data
+    # sequential: x starts with the boundary data
+    plain, opts = small("sphere_cap", transcription="sequential")
     smooth = replace(plain, weights={**plain.weights, "smoothness": 1.0})
     assert plain.weights["smoothness"] == 0.0
     vec = plain.start().boundary.to_vector()
     vec[2] += 0.05  # alpha at left vertex 3
-    nlp_plain, nlp_smooth = plain.transcribe(), smooth.transcribe()
+    nlp_plain, nlp_smooth = plain.transcribe(options=opts), smooth.transcribe(options=opts)
     x = nlp_plain.x0.copy()
     x[:vec.size] = vec
     f = [float(ca.Function("f", [n.x], [0.5 * ca.sumsqr(n.residuals)])(x))

@@ -9,19 +9,27 @@ from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model, reduced
-from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.design import DesignProblem, SolveOptions
 
 LM = "levenberg-marquardt"
 
 
-def small(name: str, **kw) -> DesignProblem:
-    return replace(DesignProblem.load(f"targets/{name}.toml"),
-                   **{"panels": (8, 8), "stop_rms": None, "solver": LM, **kw})
+PROBLEM_FIELDS = set(DesignProblem.__dataclass_fields__)
+
+
+def small(name: str, **kw) -> tuple[DesignProblem, SolveOptions]:
+    """The 8 x 8 target with Levenberg-Marquardt; ``kw`` sets DesignProblem and SolveOptions
+    fields."""
+    problem, options = rq.load_design(f"targets/{name}.toml")
+    return (replace(problem, **{"panels": (8, 8), **{k: v for k, v in kw.items()
+                                                     if k in PROBLEM_FIELDS}}),
+            replace(options, **{"stop_rms": None, "solver": LM,
+                                **{k: v for k, v in kw.items() if k not in PROBLEM_FIELDS}}))
 
 
 @pytest.fixture(scope="module")
 def manifold():
-    prob = small("quarter_vase")
+    prob, _ = small("quarter_vase")
     return prob, reduced.Manifold(prob.transcribe())
 
 
@@ -65,63 +73,63 @@ def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(
 
 @pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
 def test_levenberg_marquardt_then_ipopt_reach_ipopts_optimum(name):
-    prob = small(name, tol=1e-9, hessian="exact")
-    lm = prob.solve()
-    ipopt = replace(prob, solver="ipopt").solve()
-    assert lm.stats["status"] == "Solve_Succeeded" and lm.stats["solver"] == LM
-    assert 0 < lm.stats["marched_iterations"] <= lm.stats["iterations"]
-    assert lm.stats["objective"] == pytest.approx(ipopt.stats["objective"], rel=1e-6)
+    prob, opts = small(name, tol=1e-9, hessian="exact")
+    lm = prob.solve(opts)
+    ipopt = prob.solve(opts, solver="ipopt")
+    assert lm.stats.status == "Solve_Succeeded" and lm.stats.solver == LM
+    assert 0 < lm.stats.marched_iterations <= lm.stats.iterations
+    assert lm.stats.objective == pytest.approx(ipopt.stats.objective, rel=1e-6)
     np.testing.assert_allclose(lm.folded[::2, ::2], ipopt.folded[::2, ::2],
                                atol=1e-4 * prob.target.diameter())
 
 
 def test_every_step_is_an_admissible_design_with_a_lower_loss():
     seen = []
-    prob = small("sphere_cap", stop_rms=0.0125)
+    prob, opts = small("sphere_cap", stop_rms=0.0125)
     nlp = prob.transcribe()
-    res = prob.solve(callback=seen.append)
-    assert res.stats["status"] == "Fit_Reached" and res.fit["rms"] <= 0.0125
-    assert res.stats["iterations"] == res.stats["marched_iterations"] == len(seen) - 1 > 1
+    res = prob.solve(opts, callback=seen.append)
+    assert res.stats.status == "Fit_Reached" and res.fit.rms <= 0.0125
+    assert res.stats.iterations == res.stats.marched_iterations == len(seen) - 1 > 1
     assert seen[0]["objective"] == pytest.approx(
         float(ca.Function("f", [nlp.x], [nlp.objective])(nlp.x0)), rel=1e-12)  # the start
     objective = [e["objective"] for e in seen]
     assert np.all(np.diff(objective) < 0)
     assert max(e["inf_pr"] for e in seen) <= reduced.FEASIBLE
-    assert seen[-1]["objective"] == pytest.approx(res.stats["objective"], rel=1e-12)
+    assert seen[-1]["objective"] == pytest.approx(res.stats.objective, rel=1e-12)
 
 
 def test_an_active_side_bound_holds_on_the_remarch():
     """min_length = 0.6, which the 8 x 8 sphere cap's best fit breaks (its smallest side is
     0.54 of the mean): the QP keeps the smallest side at the bound on every re-march."""
-    prob = small("sphere_cap", min_length=0.6)
+    prob, opts = small("sphere_cap", min_length=0.6)
     nlp = prob.transcribe()
-    out = reduced.levenberg_marquardt(nlp, nlp.x0, prob.damping, 100)
+    out = reduced.levenberg_marquardt(nlp, nlp.x0, opts.damping, 100)
     assert out.status == "Stalled" and out.iterations > 3
     vec = nlp.unpack(out.x)[0].full().ravel()
     sides = numpy_model.march(rq.BoundaryData.from_vector(
         vec, prob.start().boundary.sigma, 8, 8)).side_lengths
     assert 1 - 1e-9 <= sides.min() / sides.mean() / 0.6 <= 1 + 1e-6  # active, held
-    again = reduced.levenberg_marquardt(nlp, nlp.x0, prob.damping, 100)
+    again = reduced.levenberg_marquardt(nlp, nlp.x0, opts.damping, 100)
     assert again.objective == out.objective  # deterministic
     looser = replace(prob, min_length=0.3).transcribe()
-    assert reduced.levenberg_marquardt(looser, looser.x0, prob.damping, 100).objective \
+    assert reduced.levenberg_marquardt(looser, looser.x0, opts.damping, 100).objective \
         < out.objective  # the bound costs fit
 
 
 def test_fixed_groups_stay_at_their_start():
-    prob = small("hyperboloid", fix=("lengths", "omega"), stop_rms=0.02)
-    res = prob.solve()
+    prob, opts = small("hyperboloid", fix=("lengths", "omega"), stop_rms=0.02)
+    res = prob.solve(opts)
     start = prob.start()
     for side in ("l_left", "l_bottom"):
         np.testing.assert_array_equal(getattr(res.boundary, side), getattr(start.boundary, side))
     assert res.omega == start.omega
-    assert res.stats["marched_iterations"] > 0
+    assert res.stats.marched_iterations > 0
 
 
 def test_iteration_and_time_limits_raise_solver_failed_with_an_admissible_best():
-    prob = small("sphere_cap", max_iter=1, tol=1e-12)
+    prob, opts = small("sphere_cap", max_iter=1, tol=1e-12)
     with pytest.raises(rq.SolverFailed, match="Maximum_Iterations_Exceeded") as exc:
-        prob.solve()
+        prob.solve(opts)
     nlp = prob.transcribe()
     best = exc.value.best_iterate
     F = ca.Function("F", [nlp.x], [0.5 * ca.sumsqr(nlp.residuals), nlp.g])
@@ -129,10 +137,11 @@ def test_iteration_and_time_limits_raise_solver_failed_with_an_admissible_best()
     g = g.full().ravel()
     assert np.all(g >= nlp.lbg - 1e-9) and np.all(g <= nlp.ubg + 1e-9)
     assert float(f) < float(F(nlp.x0)[0])  # one step, which lowered the loss
-    assert exc.value.stats["history"]["objective"] == [pytest.approx(float(F(nlp.x0)[0])),
-                                                       pytest.approx(float(f))]
+    assert exc.value.stats.history["objective"] == [pytest.approx(float(F(nlp.x0)[0])),
+                                                    pytest.approx(float(f))]
+    prob, opts = small("sphere_cap", time_limit=1e-6)
     with pytest.raises(rq.SolverFailed, match="Maximum_WallTime_Exceeded"):
-        small("sphere_cap", time_limit=1e-6).solve()
+        prob.solve(opts)
 
 
 @pytest.mark.parametrize("kw", [{"solver": "newton"}, {"transcription": "sequential"},
@@ -151,9 +160,22 @@ def test_an_inadmissible_start_takes_no_step_and_ipopt_solves_from_it(manifold):
     np.testing.assert_array_equal(out.x, x)
     # a Miura start whose sides break min_length (its smallest is 0.82 of the mean):
     # IPOPT solves from it as it would without the Levenberg-Marquardt solver
-    prob = small("quarter_vase", min_length=0.9)
+    prob, opts = small("quarter_vase", min_length=0.9)
     nlp = prob.transcribe()
     assert reduced.levenberg_marquardt(nlp, nlp.x0, 0.03, 10).status == "Inadmissible_Start"
-    res = prob.solve()
-    assert res.stats["marched_iterations"] == 0 and res.stats["status"] == "Solve_Succeeded"
-    assert res.fit["min_side_over_mean"] >= 0.9 * (1 - 1e-6)
+    res = prob.solve(opts)
+    assert res.stats.marched_iterations == 0 and res.stats.status == "Solve_Succeeded"
+    assert res.fit.min_side_over_mean >= 0.9 * (1 - 1e-6)
+
+
+def test_a_solver_ending_in_nan_raises_solver_failed_never_a_result(monkeypatch):
+    prob, opts = small("sphere_cap", stop_rms=0.05)
+
+    def nan_solver(nlp, x, *args, **kw):
+        return reduced.Outcome(x=np.full_like(x, np.nan), objective=float("nan"),
+                               iterations=1, status="Fit_Reached")
+
+    monkeypatch.setattr(reduced, "levenberg_marquardt", nan_solver)
+    with pytest.raises(rq.SolverFailed, match="NaN or inf in the design vector") as exc:
+        prob.solve(opts)
+    assert exc.value.status == "non_finite" and exc.value.stats.status == "Fit_Reached"

@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 
 from rffqm_nlp import surfaces, sweeps
 from rffqm_nlp.cli import app
-from rffqm_nlp.design import DesignProblem, multistart_starts
+from rffqm_nlp.design import DesignProblem, SolveOptions, multistart_starts
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
 from rffqm_nlp.results import DesignResult
 
@@ -35,6 +35,9 @@ name = "sphere_cap"
 
 [design]
 panels = [4, 4]
+
+[solve]
+solver = "ipopt"
 max_iter = 200
 
 [sweep]
@@ -115,7 +118,7 @@ def test_cluster_run_writes_one_row_and_one_folder_per_design(cluster_run, desig
     assert len(pd.read_csv(out / "results.csv")) == 4
     for design, (_, row) in zip(designs, frame.iterrows()):
         result = DesignResult.load(out / "designs" / design.id)
-        assert result.fit["rms"] == row["rms"]
+        assert result.fit.rms == row["rms"]
         assert result.problem["target"]["radius"] == row["target.radius"]
         assert sweeps.completed_row(out / "designs" / design.id, design) is not None
     assert not [p for p in out.rglob(".*")], "temporary files left behind"
@@ -197,9 +200,14 @@ BAD_STUDIES = [
     ("[sweep]\n\"target.radius\" = [4.0, 4]\n", "are the same problem"),
     ("[sweep]\n\"design.layout\" = [\"zigzag\"]\n", "layout must be one of"),
     ("[sweep]\n\"design.panels\" = [5]\n", "panels must be two even numbers"),
-    ("[solve]\nstarts = 3\n", "unknown [solve] key(s) ['starts']"),
-    ("[sweep]\n\"solve.multistart\" = [0]\n", "solve.multistart must be a whole number"),
+    ("[solve]\nstarts = 3\n", "unknown [solve] key 'starts'; did you mean 'multistart'?"),
+    ("[sweep]\n\"solve.multistart\" = [0]\n", "multistart must be a whole number >= 1"),
     ("[sweep]\n\"solve.starts\" = [1]\n", "unknown solve key 'starts'"),
+    ("[design]\nstop_rms = 0.01\n", "[design] stop_rms is a solve option: move it to the "
+                                   "[solve] table"),
+    ("[solve]\nstop_rms = nan\n", "stop_rms must be a finite number or None"),
+    ("[sweep]\n\"design.stop_rms\" = [0.01]\n", "it is a solve option"),
+    ("[sweep]\n\"design.layot\" = [\"zigzag_i\"]\n", "did you mean design.layout?"),
     ("[[sweep.cases]]\nradius = 3.0\n", "[[sweep.cases]] #1: 'radius' is not a parameter"),
     ("[sweep]\n\"target.radius\" = [3.0]\n[[sweep.cases]]\n\"target.radius\" = 4.0\n",
      "both a [sweep] parameter and set by [[sweep.cases]] #1"),
@@ -235,7 +243,7 @@ def test_base_file_and_inline_tables(tmp_path):
     # target.name starts the target afresh (no sphere radius on the saddle); other keys merge.
     assert saddle["target"] == surfaces.get("saddle").to_config()
     assert cap["target"]["radius"] == 3.0 and cap["design"]["layout"] == "zigzag_j"
-    assert cap["design"]["panels"] == [12, 12] and cap["solve"] == sweeps.SOLVE_DEFAULTS
+    assert cap["design"]["panels"] == [12, 12] and cap["solve"] == SolveOptions().to_config()
     (tmp_path / "targets" / "cap.toml").unlink()
     with pytest.raises(InputError, match="no such design file .*relative to the study file"):
         sweeps.Study.load(study)
@@ -291,23 +299,27 @@ def test_random_sample_is_seeded_and_inside_its_ranges():
 
 # --------------------------------------------------------------------------- multistart
 def tiny() -> DesignProblem:
-    return DesignProblem(surfaces.get("sphere_cap", radius=4.0), panels=(4, 4), max_iter=200)
+    return DesignProblem(surfaces.get("sphere_cap", radius=4.0), panels=(4, 4))
+
+
+#: the options of the multistart tests
+TINY = SolveOptions(solver="ipopt", max_iter=200)
 
 
 def test_multistart_keeps_the_best_start_and_records_every_start():
     prob = tiny()
-    res = prob.solve(multistart=3, seed=0)
-    ms = res.stats["multistart"]
+    res = prob.solve(TINY, multistart=3, seed=0)
+    ms = res.stats.multistart
     assert ms["starts"] == 3 and ms["seed"] == 0 and len(ms["runs"]) == 3
     assert [(r["alpha0"], r["omega0"]) for r in ms["runs"]] == multistart_starts(prob, 3, 0)
     assert ms["runs"][0]["alpha0"] == prob.alpha0 and ms["runs"][0]["omega0"] == prob.omega0
     rms = [r["rms"] for r in ms["runs"]]
     assert all(r is not None for r in rms)
-    assert ms["chosen"] == int(np.argmin(rms)) and res.fit["rms"] == min(rms)
-    assert res.problem == prob.to_config()
+    assert ms["chosen"] == int(np.argmin(rms)) and res.fit.rms == min(rms)
+    assert res.problem == prob.config(replace(TINY, multistart=3, seed=0))
     chosen = ms["runs"][ms["chosen"]]
-    again = replace(prob, alpha0=chosen["alpha0"], omega0=chosen["omega0"]).solve()
-    assert again.fit["rms"] == pytest.approx(res.fit["rms"], rel=1e-9)
+    again = replace(prob, alpha0=chosen["alpha0"], omega0=chosen["omega0"]).solve(TINY)
+    assert again.fit.rms == pytest.approx(res.fit.rms, rel=1e-9)
     for a, w in multistart_starts(prob, 20, 5):
         assert prob.min_angle < a < np.pi / 2 and prob.omega_bounds[0] < w < prob.omega_bounds[1]
 
@@ -316,53 +328,55 @@ def test_multistart_tolerates_failed_starts_unless_all_fail(monkeypatch):
     prob = tiny()
     real = DesignProblem.solve
 
-    def flaky(self, *args, multistart=1, **kw):
-        if multistart == 1 and self.alpha0 == prob.alpha0:
+    def flaky(self, options, **kw):
+        if options.multistart == 1 and self.alpha0 == prob.alpha0:
             raise SolverFailed("no luck", status="Maximum_Iterations_Exceeded")
-        return real(self, *args, multistart=multistart, **kw)
+        return real(self, options, **kw)
 
     monkeypatch.setattr(DesignProblem, "solve", flaky)
-    res = prob.solve(multistart=2, seed=0)
-    first, second = res.stats["multistart"]["runs"]
-    assert res.stats["multistart"]["chosen"] == 1
+    res = prob.solve(replace(TINY, multistart=2, seed=0))
+    first, second = res.stats.multistart["runs"]
+    assert res.stats.multistart["chosen"] == 1
     assert first["status"] == "Maximum_Iterations_Exceeded" and first["rms"] is None
-    assert second["rms"] == res.fit["rms"]
+    assert second["rms"] == res.fit.rms
 
-    def failing(self, *args, multistart=1, **kw):
-        if multistart == 1:
+    def failing(self, options, **kw):
+        if options.multistart == 1:
             raise SolverFailed("no luck", status="Restoration_Failed")
-        return real(self, *args, multistart=multistart, **kw)
+        return real(self, options, **kw)
 
     monkeypatch.setattr(DesignProblem, "solve", failing)
     with pytest.raises(SolverFailed, match="all 3 starts of the multistart failed") as info:
-        prob.solve(multistart=3)
+        prob.solve(replace(TINY, multistart=3))
     assert info.value.status == "Restoration_Failed"
 
-    def infeasible(self, *args, multistart=1, **kw):
-        if multistart == 1:
+    def infeasible(self, options, **kw):
+        if options.multistart == 1:
             raise InfeasibleDesign("cannot")
-        return real(self, *args, multistart=multistart, **kw)
+        return real(self, options, **kw)
 
     monkeypatch.setattr(DesignProblem, "solve", infeasible)
     with pytest.raises(InfeasibleDesign, match="all 2 starts"):
-        prob.solve(multistart=2)
+        prob.solve(replace(TINY, multistart=2))
 
 
 def test_multistart_rejects_bad_arguments():
     prob = tiny()
     with pytest.raises(InputError, match="multistart must be a whole number"):
-        prob.solve(multistart=0)
+        prob.solve(TINY, multistart=0)
     with pytest.raises(InputError, match="seed must be a whole number"):
-        prob.solve(multistart=2, seed=-1)
+        prob.solve(TINY, multistart=2, seed=-1)
     with pytest.raises(InputError, match="exclude each other"):
-        prob.solve(multistart=2, warm_start=object())
+        prob.solve(TINY, multistart=2, warm_start=object())
+    with pytest.raises(InputError, match="unknown solve\\(\\) option 'starts'; did you mean"):
+        prob.solve(TINY, starts=2)
 
 
 # --------------------------------------------------------------------------- command line
 def test_cli_sweep_serial_with_multistart(tmp_path):
     study = tmp_path / "study.toml"
     study.write_text(STUDY.replace("[3.0, 3.5, 4.0, 4.5]", "[3.0, 4.0]")
-                     + "[solve]\nmultistart = 2\n")
+                     .replace("max_iter = 200\n", "max_iter = 200\nmultistart = 2\n"))
     out = tmp_path / "out"
     res = CliRunner().invoke(app, ["sweep", str(study), "--out", str(out), "--scheduler",
                                    "none"])
@@ -374,8 +388,8 @@ def test_cli_sweep_serial_with_multistart(tmp_path):
     assert list(frame["status"]) == ["solved", "solved"]
     for _, row in frame.iterrows():
         result = DesignResult.load(out / "designs" / row["id"])
-        assert result.stats["multistart"]["chosen"] == row["start"]
-        assert len(result.stats["multistart"]["runs"]) == 2
+        assert result.stats.multistart["chosen"] == row["start"]
+        assert len(result.stats.multistart["runs"]) == 2
     # The saved results are ordinary design results: the other commands take them.
     first = out / "designs" / frame["id"][0]
     res = CliRunner().invoke(app, ["export", str(first), "--format", "svg"])
