@@ -57,10 +57,10 @@ from scipy.interpolate import BSpline
 from scipy.ndimage import binary_erosion
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
-from scipy.spatial import ConvexHull, Delaunay, cKDTree
+from scipy.spatial import ConvexHull, Delaunay
 
 from .errors import SurfaceError
-from .surfaces import Surface, point_set_diameter
+from .surfaces import Surface
 
 #: Largest angle between a face normal and the best-fit plane's normal for a projection.
 GRAPH_ANGLE = math.radians(80.0)

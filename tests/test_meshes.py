@@ -9,6 +9,7 @@ import trimesh
 from scipy.spatial import Delaunay
 
 import rffqm_nlp as rq
+from rffqm_nlp import meshes
 from rffqm_nlp.errors import SurfaceError
 from rffqm_nlp.meshes import MAX_DEVIATION, Mesh, shape_distances
 
@@ -62,6 +63,17 @@ def test_general_disk_uses_a_conformal_map():
     # the domain covers most of the (developable) strip: area close to the surface's
     (a, b), (c, d) = mesh.domain
     assert (b - a) * (d - c) > 0.9 * surface.mesh(41, 41).area
+
+
+def test_tutte_fallback_is_injective_with_the_boundary_on_a_circle():
+    surface = rq.surfaces.get("torus_patch", domain=((-1.2, 1.2), (0.0, 3.1)))
+    mesh = meshes._clean(surface.mesh(31, 31).vertices, surface.mesh(31, 31).faces, "torus")
+    meshes._check_disk(mesh, "torus")
+    uv = meshes._tutte(mesh)
+    loop = meshes._boundary_loop(mesh)
+    assert np.allclose(np.linalg.norm(uv[loop], axis=1), 1.0)
+    assert (meshes._signed_areas(mesh.faces, uv) > 0).all()
+    assert meshes._injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool))
 
 
 def test_sphere_cap_curvature_from_the_spline():
@@ -170,11 +182,26 @@ def _non_manifold() -> tuple[np.ndarray, np.ndarray]:
     return vertices, np.r_[grid.faces, [[fin[0], fin[1], len(vertices) - 1]]]
 
 
+def _pinched() -> tuple[np.ndarray, np.ndarray]:
+    """Two removed cells touching at one vertex: a hole whose boundary pinches there."""
+    grid = _plane_grid(9)
+    keep = np.ones(len(grid.faces), dtype=bool)
+    keep[[54, 55, 72, 73]] = False  # cells (3, 3) and (4, 4)
+    return grid.vertices, grid.faces[keep]
+
+
+def _torus_with_a_cut() -> tuple[np.ndarray, np.ndarray]:
+    torus = trimesh.creation.torus(major_radius=3.0, minor_radius=1.0)
+    return torus.vertices, torus.faces[1:]
+
+
 @pytest.mark.parametrize("make, found", [
     (lambda: trimesh.creation.icosphere(), "closed surface"),
     (_two_pieces, "2 separate pieces"),
     (_with_hole, "2 boundary loops"),
     (_non_manifold, "1 non-manifold edges"),
+    (_pinched, "1 non-manifold vertices"),
+    (_torus_with_a_cut, "Euler characteristic -1"),
     (lambda: np.random.default_rng(0).normal(size=(10, 3)), "only 10 distinct points"),
     (lambda: (np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), np.array([[0, 1, 2]])),
      "non-finite"),
