@@ -1,4 +1,4 @@
-"""Levenberg-Marquardt on the marching manifold (``DesignProblem(solver="levenberg-marquardt")``).
+"""Levenberg-Marquardt on the marching manifold (``SolveOptions(solver="levenberg-marquardt")``).
 
 The simultaneous NLP (:func:`rffqm_nlp.transcription.simultaneous`) states the marching
 equations c(x) = 0 as constraints, and IPOPT's iterates meet them only near the optimum.
@@ -28,9 +28,8 @@ Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least square
 problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D_d plus
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
-lattice point). On the bundled 20 x 20 targets it took 8, 2 and 2 iterations to 0.9%
-RMS/diameter (studies/results/solve_cost.md); with the whole state in M 9, 4 and 4, with a
-diagonal M 25, 5 and 3 (one run each).
+lattice point); this metric took fewer iterations than the whole state or a diagonal
+(docs/solvers.md).
 """
 
 from __future__ import annotations
@@ -63,7 +62,7 @@ ROWS = 65536
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: design columns per triangular solve (SuperLU solves a few right-hand sides at a time
-#: fastest: 16 took 0.48 s where 256 at once took 0.83 s at 130,000 rows)
+#: fastest, docs/solvers.md)
 BLOCK = 16
 
 

@@ -424,9 +424,9 @@ def one_thread() -> AbstractContextManager:
     name, so it is registered here, and IPOPT's plugin is loaded first (``has_nlpsol`` loads
     it, silently when it already is) so that the library is found.
 
-    The thread count of that OpenBLAS changes IPOPT's path in the last digits (measured: 80
-    against 82 iterations, RMS differing by 5e-6 relative, on an 8 x 8 sphere cap), so
-    without the limit a serial run would not reproduce a cluster run's table.
+    The thread count of that OpenBLAS changes IPOPT's path in the last digits (iterations
+    and fit, docs/solvers.md), so without the limit a serial run would not reproduce a
+    cluster run's table.
     """
     import casadi
     from threadpoolctl import threadpool_limits
@@ -590,7 +590,7 @@ def _client(scheduler: "str | Client | None", workers: int) -> Iterator["Client"
         return
     if scheduler in (None, "local"):
         try:
-            # the workers' statistical profiler costs 20-40% of a design's time (measured)
+            # the workers' statistical profiler costs a share of every design's time
             with dask.config.set({"distributed.scheduler.allowed-failures": 0,
                                   "distributed.worker.profile.enabled": False}):
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1,

@@ -74,9 +74,9 @@ def lagrangian_hessian(nlp: NLP) -> ca.Function:
 
     Omega enters every crease and the rigid alignment every lattice point, so the Hessian
     has dense rows; CasADi's star colouring of the whole Hessian grows like their degree
-    squared (68% of the 13 s build at 60 x 60 panels). Here only the local block is
-    coloured; the global rows are the Jacobian of grad_global L (8 rows). The build at
-    80 x 80 panels took 6 s instead of 34 (studies/bench_build.py).
+    squared and dominated the build of large patterns. Here only the local block is
+    coloured; the global rows are the Jacobian of grad_global L (8 rows), which builds
+    several times faster (studies/results/bench_build.md).
     """
     local, glob = nlp.parts
 
@@ -99,8 +99,8 @@ def gauss_newton_hessian(nlp: NLP, damping: float = 0.0) -> ca.Function:
     factorises the KKT system once per iteration (with the exact Hessian it first tries
     without a perturbation, finds the wrong inertia and factorises again). Most variables
     of the simultaneous NLP do not enter the loss, so J' J alone leaves them without any
-    curvature: undamped, the 20 x 20 sphere cap took steps of norm 2-4 and had not recovered
-    feasibility 380 iterations later.
+    curvature: undamped, the sphere cap took huge steps and did not recover feasibility
+    (docs/solvers.md).
     """
     J = ca.jacobian(nlp.residuals, nlp.x)
     JtJ = ca.mtimes(J.T, J)
@@ -157,7 +157,7 @@ def loss_residuals(r, rotation, translation, target: np.ndarray, weights: dict[s
       the same central differences (:func:`shape.fundamental_forms`), over spacing^2;
     * ``position``: R r + t minus the target lattice over ``spacing``: the position term
       after alignment (R, t are design variables) that sees the sideways offsets of the four
-      parity classes that central differences miss (PAPER_NOTES s.8).
+      parity classes that central differences miss (docs/paper.md).
 
     Each group is divided by sqrt(its count) and multiplied by sqrt(weight), so a weight is
     the share of a mean square in the objective.
@@ -359,10 +359,10 @@ class _MeanTree:
 
     One equation sum(s) = K * mean would be a dense row of the constraint Jacobian, and the
     mean a dense column (it enters every side constraint); CasADi colours Jacobians in one
-    direction, so that row and column together cost a sweep per side (841 forward, 1601
-    reverse colours at 20 x 20 panels). The tree adds about K / (branching - 1) unknowns
-    and a few tens of colours; a running mean (one variable per side) did the same with K
-    unknowns, 12% of the KKT system at 20 x 20 panels.
+    direction, so that row and column together cost a sweep per side. The tree adds about
+    K / (branching - 1) unknowns and a few tens of colours; a running mean (one variable per
+    side) did the same with K unknowns, a noticeable share of the KKT system
+    (docs/solvers.md).
     """
 
     def __init__(self, K: int, branching: int = 16):
@@ -412,10 +412,8 @@ def _local_crease_quaternions(A, B, sigma: np.ndarray, TH, omega, PHI):
     vertex (i = 0), which would couple each crease of a column to that vertex. It is also
     infinite where that m2 vanishes (alpha = beta at sigma = +1): a point the boundary MV
     constraint excludes, but IPOPT's infeasible iterates can cross it. Lifting kv itself
-    (KV[i] = sigma[i] KV[i-1]), the sphere cap and the quarter vase diverged at 40 x 40
-    panels (inf_pr 0.25 -> 32 and 0.06 -> 5.7 in one step, never recovered); lifted as
-    below, they converged in 53 and 69 iterations (the hyperboloid, which converged either
-    way, in 178: see the sides in :func:`simultaneous`).
+    (KV[i] = sigma[i] KV[i-1]), the sphere cap and the quarter vase diverged at larger
+    sizes; lifted as below, they converged (docs/solvers.md).
 
     PHI (N-1 x M) holds phi = atan(kv[1:N, :M]), smooth through kv = +-inf, with the local
     chain PHI[i] = sigma[i] PHI[i-1] and the bottom row from its vertex: tan(phi) = kv with
@@ -461,14 +459,13 @@ def simultaneous(setup: Setup) -> NLP:
 
     Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
     d, l_cd, l_bd; the sides are stated multiplied through by the denominator of
-    eq:getSides (:func:`vertex.panel_side_residuals`). With the quotient the hyperboloid at
-    40 x 40 panels took 178 iterations; without it the three bundled targets took 59-79.
+    eq:getSides (:func:`vertex.panel_side_residuals`); with the quotient IPOPT needed far
+    more iterations (docs/solvers.md).
     Kinematics: edge directions accumulate sector angles, panel quaternions multiply by
     crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc). The loss
     sees only the coarse lattice, but lifting every vertex keeps large designs converging:
-    with the coarse lattice points alone (a fifth less KKT system) the 40 x 40 sphere cap
-    lost feasibility (inf_pr 0.013 -> 1.9 in five iterations) and had not recovered after
-    47, where with every vertex it stops at 0.87% RMS/diameter after 13.
+    with the coarse lattice points alone (a smaller KKT system) a large sphere cap lost
+    feasibility and did not recover (docs/solvers.md).
 
     Every equality row is local (a panel and its neighbours): the column factors of the fold
     multipliers are lifted (PHI, see :func:`_local_crease_quaternions`) and the mean side is
