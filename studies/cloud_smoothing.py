@@ -9,19 +9,20 @@ noise), the spline's RMS deviation from the noisy points over sigma (about 1: it
 surface, not the noise) and the fit time.
 
     .venv/bin/python studies/cloud_smoothing.py [--noise 0.002] [--out studies/results]
+    .venv/bin/python studies/cloud_smoothing.py --smoke   (one surface, 15 x 15 points, the
+        default lambda, temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 import rffqm_nlp as rq
+from common import RESULTS, Run, add_smoke, smoke_dir
 from rffqm_nlp import meshes
 
 SURFACES = ["sphere_cap", "hyperboloid", "quarter_vase", "saddle", "torus_patch",
@@ -32,19 +33,24 @@ SMOOTHINGS = [1e-3, meshes.CLOUD_SMOOTHING, 0.1, 1.0]
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--noise", type=float, default=0.002, help="sigma over the diameter")
-    parser.add_argument("--out", type=Path, default=Path("studies/results"))
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    add_smoke(parser)
     args = parser.parse_args()
-    lines = [f"# Point clouds with {args.noise:.1%} noise ({datetime.date.today()}, 60 x 60 "
-             f"points, load {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)", "",
+    surfaces, smoothings, side = SURFACES, SMOOTHINGS, 60
+    if args.smoke:
+        surfaces, smoothings, side = SURFACES[:1], [meshes.CLOUD_SMOOTHING], 15
+        args.out = smoke_dir("cloud_smoothing")
+    run = Run()
+    lines = [f"# Point clouds with {args.noise:.1%} noise ({side} x {side} points)", "",
              "| surface | lambda | knots | RMS to surface / sigma | max / sigma | "
              "RMS to points / sigma | time (s) |", "|---|---|---|---|---|---|---|"]
     rng = np.random.default_rng(0)
-    for name in SURFACES:
+    for name in surfaces:
         surface = rq.surfaces.get(name)
         sigma = args.noise * surface.diameter()
-        points = surface.sample(60, 60).reshape(-1, 3)
+        points = surface.sample(side, side).reshape(-1, 3)
         noisy = points + rng.normal(scale=sigma, size=points.shape)
-        for lam in SMOOTHINGS:
+        for lam in smoothings:
             t0 = time.perf_counter()
             cloud = meshes.Mesh(noisy, smoothing=lam)
             elapsed = time.perf_counter() - t0
@@ -54,6 +60,7 @@ def main() -> None:
             lines.append(f"| {name} | {lam:g}{mark} | {cloud.knots} | "
                          f"{np.sqrt(np.mean(dist ** 2)) / sigma:.2f} | {dist.max() / sigma:.2f} "
                          f"| {dev:.2f} | {elapsed:.2f} |")
+    lines[1:1] = ["", f"- {run.header()}"]
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "cloud_smoothing.md").write_text(text)

@@ -11,19 +11,20 @@ design can cover), and the largest distance of a 20 x 20 lattice of the fitted M
 original surface over its diameter (for the package's own maps).
 
     .venv/bin/python studies/mesh_parametrization.py [--n 61] [--out studies/results]
+    .venv/bin/python studies/mesh_parametrization.py --smoke   (one surface at 11 x 11,
+        temporary output)
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 import rffqm_nlp as rq
+from common import RESULTS, Run, add_smoke, smoke_dir
 from rffqm_nlp import meshes
 
 CASES = [("cylinder", ((-2.0, 2.0), (-1.5, 1.5))),
@@ -80,10 +81,15 @@ def coverage(mesh, uv: np.ndarray) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=61, help="mesh vertices per direction")
-    parser.add_argument("--out", type=Path, default=Path("studies/results"))
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    add_smoke(parser)
     args = parser.parse_args()
+    cases = CASES
+    if args.smoke:
+        args.n, cases, args.out = 11, CASES[:1], smoke_dir("mesh_parametrization")
+    run = Run()
     rows = []
-    for name, dom in CASES:
+    for name, dom in cases:
         surface = rq.surfaces.get(name, domain=dom)
         mesh = meshes._clean(surface.mesh(args.n, args.n).vertices,
                              surface.mesh(args.n, args.n).faces, name)
@@ -98,9 +104,8 @@ def main() -> None:
         lattice = surface.closest_points(fitted.lattice(20, 20))[2].max() / surface.diameter()
         rows.append((name, f"Mesh() used: {fitted.parametrization}", float("nan"),
                      float("nan"), float("nan"), 0, float(lattice)))
-    load = os.getloadavg()[0]
-    lines = [f"# Parametrization of non-graph meshes ({datetime.date.today()}, "
-             f"{args.n} x {args.n} vertices, load {load:.1f} on {os.cpu_count()} CPUs)", "",
+    lines = [f"# Parametrization of non-graph meshes ({args.n} x {args.n} vertices)", "",
+             f"- {run.header()}", "",
              "| surface (domain) | map | time (s) | distortion mean | distortion max | "
              "flipped | area in domain |", "|---|---|---|---|---|---|---|"]
     for name, label, elapsed, mean, worst, flipped, cov in rows:
