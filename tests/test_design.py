@@ -464,3 +464,33 @@ def test_smoothness_weight_enters_the_objective():
     count = transcription.smoothness_residuals(ca.DM(np.zeros(vec.size + 1)),
                                                2 * smooth.N, 2 * smooth.M).numel()
     assert f[1] - f[0] == pytest.approx(0.5 * 6 * 0.05 ** 2 / count, rel=1e-9)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("[design]\nstop_rms = 0.01\n", ["[design] stop_rms", "move it to the [solve] table"]),
+    ("[desing]\npanels = [8, 8]\n", ["desing", "design"]),
+    ("[solve]\nsolvr = \"ipopt\"\n", ["solvr", "solver"]),
+    ("[design]\npanel = [8, 8]\n", ["panel", "panels"]),
+    ("[design.weights]\nposition = nan\n", ["position"]),
+])
+def test_design_files_are_refused_in_one_line_naming_the_key(tmp_path, text, words):
+    path = tmp_path / "design.toml"
+    path.write_text("[target]\nname = \"sphere_cap\"\n" + text)
+    with pytest.raises(rq.InputError) as info:
+        rq.load_design(path)
+    message = str(info.value)
+    assert "\n" not in message and all(word in message for word in words), message
+
+
+def test_solve_options_come_from_the_solve_table_and_overrides(tmp_path):
+    path = tmp_path / "design.toml"
+    path.write_text("[target]\nname = \"sphere_cap\"\n[design]\npanels = [8, 8]\n"
+                    "[solve]\nsolver = \"ipopt\"\nstop_rms = 0.02\nmax_iter = 50\n")
+    problem, options = rq.load_design(path)
+    assert problem.panels == (8, 8)
+    assert (options.solver, options.stop_rms, options.max_iter) == ("ipopt", 0.02, 50)
+    assert rq.SolveOptions().solver == "levenberg-marquardt"
+    res = problem.solve(options, stop_rms=0.05)
+    assert res.stats.solver == "ipopt" and res.problem["solve"]["stop_rms"] == 0.05
+    with pytest.raises(rq.InputError, match="solvr"):
+        problem.solve(options, solvr="ipopt")

@@ -269,6 +269,15 @@ def test_grid_is_the_product_of_the_lists_with_stable_unique_ids(radii, layouts,
         assert f"radius={d.params['target.radius']:.4g}" in d.name
 
 
+def test_solve_options_are_swept_under_solve():
+    base = {"target": {"name": "sphere_cap"}, "design": {"panels": [8, 8]},
+            "solve": {"solver": "ipopt"}}
+    designs = sweeps.Study(base=base, parameters={"solve.stop_rms": [0.01, 0.02]}).designs()
+    assert [d.config["solve"]["stop_rms"] for d in designs] == [0.01, 0.02]
+    assert all(d.config["solve"]["solver"] == "ipopt" for d in designs)
+    assert [d.name for d in designs] == ["stop_rms=0.01", "stop_rms=0.02"]
+
+
 def test_random_sample_is_seeded_and_inside_its_ranges():
     base = {"target": {"name": "sphere_cap"}, "design": {"panels": [8, 8]}}
     params = {"target.radius": sweeps.Range(3.0, 6.0), "design.alpha0": sweeps.Range(0.9, 1.3),
