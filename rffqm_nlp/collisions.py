@@ -1,0 +1,388 @@
+"""Self-contact of a folding pattern: flat overlaps and the first contact along the motion.
+
+RFFQM guarantees a rigid folding motion, not that the sheet stays clear of itself.
+:func:`collisions` checks the motion omega in [0, omega_max] of a marched
+:class:`~rffqm_nlp.pattern.Pattern` for two panels that share no vertex touching,
+intersecting or coming closer than a ``clearance``.
+
+Method.
+
+* Geometry: panels are rigid and planar, so panel (i, j) with corners a = (i, j),
+  b = (i+1, j), c = (i, j+1), d = (i+1, j+1) is exactly the two triangles (a, c, d) and
+  (a, d, b); folded states come from :func:`rffqm_nlp.numpy_model.fold` (batched).
+* Narrow phase, vectorised over pairs of triangles: an exact intersection test by
+  separating axes (the two normals, the nine edge-edge cross products and the six in-plane
+  edge normals, so the coplanar case is included), and for disjoint triangles the exact
+  distance (the smallest of the nine segment-segment distances and the six vertex-face
+  distances whose foot lies inside the face). The distance between two panels is the
+  smallest of their four triangle pairs.
+* Broad phase: a :class:`scipy.spatial.cKDTree` on panel centres at each coarse sample;
+  candidate pairs are the panels whose bounding spheres, grown by the clearance and a
+  margin of one panel diameter, overlap at either end of a coarse step.
+* Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
+  a step [w0, w1] a candidate pair is certified clear when
+  (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance and m bounds how far
+  the pair's distance can change over the step: SAFETY times the largest relative
+  displacement of a vertex of one panel against a vertex of the other between w0 and w1
+  (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex).
+  Uncertified pairs are followed into the halves of the step (one batched fold per
+  level) until they are certified, touch at a sample (d <= clearance), or the step is
+  shorter than ``tol``; contacts after the earliest one found are dropped on the way.
+  ``first_omega`` is the earliest sample in contact, so it lies within ``tol`` after the
+  true first contact.
+* Guarantee and its assumptions: no contact is missed provided that within one step the
+  path of every vertex relative to another is at most SAFETY times its chord (smooth
+  motion on short steps) and no two panels farther apart than the margin at both ends of
+  a coarse step pass through each other within it; a pair whose distance dips below the
+  clearance only between two samples less than ``tol`` apart may be missed (a near miss
+  shorter than ``tol`` in omega).
+* Flat overlaps: at omega = 0 every panel is a convex quadrilateral in the plane; two
+  panels overlap when their interiors do (a separating-axis test on the eight edge
+  normals, touching along an edge or at a corner is not an overlap).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import InputError
+from .numpy_model import fold
+from .pattern import Pattern, check_omega
+
+#: Largest coarse step in omega.
+MAX_STEP = 0.05
+#: Factor on a step's relative vertex displacement (chord) bounding its path.
+SAFETY = 2.0
+#: Separating-axis gaps below this times the pattern's scale count as touching.
+REL_EPS = 1e-12
+
+#: Triangle pairs per vectorised batch of the narrow phase (bounds its memory).
+CHUNK = 4096
+
+PanelPair = tuple[tuple[int, int], tuple[int, int]]
+
+#: Corners (a, b, c, d) -> the triangles (a, c, d) and (a, d, b).
+_TRIANGLES = np.array([[0, 2, 3], [0, 3, 1]])
+#: Triangle index pairs (4, 2) of a panel pair.
+_TRI_PAIRS = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    """Result of :func:`collisions`.
+
+    ``free``: no flat overlap and no contact on the motion. ``first_omega``: the smallest
+    |omega| in [0, |omega_max|] at which two panels that share no vertex touch or come
+    closer than ``clearance``, signed like ``omega_max`` (0.0 when the flat state is
+    already in contact), or None. ``pairs``: the panel pairs in contact there, 1-based
+    ((i, j), (k, l)) with (i, j) < (k, l). ``flat_overlaps``: pairs whose interiors overlap
+    in the flat pattern (any two panels, neighbours included).
+    """
+
+    free: bool
+    first_omega: float | None
+    pairs: list[PanelPair] = field(default_factory=list)
+    flat_overlaps: list[PanelPair] = field(default_factory=list)
+    omega_max: float = 0.0
+    clearance: float = 0.0
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (pairs as nested lists)."""
+        return {"free": self.free, "first_omega": self.first_omega,
+                "pairs": [[list(p), list(q)] for p, q in self.pairs],
+                "flat_overlaps": [[list(p), list(q)] for p, q in self.flat_overlaps],
+                "omega_max": self.omega_max, "clearance": self.clearance}
+
+
+def collisions(pattern: Pattern, omega_max: float, *, clearance: float = 0.0,
+               tol: float = 1e-4) -> CollisionReport:
+    """Flat overlaps and the first self-contact of ``pattern`` folding from 0 to ``omega_max``.
+
+    ``omega_max`` in [-pi, pi] (negative: the other folding branch); ``clearance`` >= 0 a
+    distance (a sheet thickness) that panels sharing no vertex must keep; ``tol`` > 0 the
+    accuracy of ``first_omega`` in omega. See the module docstring for the method.
+    """
+    w_max = float(check_omega(omega_max, "omega_max"))
+    if not (np.isfinite(clearance) and clearance >= 0):
+        raise InputError(f"clearance must be a finite distance >= 0, got {clearance!r}")
+    if not (np.isfinite(tol) and tol > 0):
+        raise InputError(f"tol must be a finite positive step in omega, got {tol!r}")
+    geo = _Geometry(pattern)
+    flat = _flat_overlaps(geo)
+    first, pairs = _first_contact(geo, w_max, float(clearance), float(tol))
+    return CollisionReport(free=not flat and first is None, first_omega=first, pairs=pairs,
+                           flat_overlaps=flat, omega_max=w_max, clearance=float(clearance))
+
+
+# --------------------------------------------------------------------------- panels
+
+class _Geometry:
+    """Panel bookkeeping of a pattern: corner indices, sizes, the folded states.
+
+    Panels are numbered p = (i-1) M + (j-1); ``corners`` (P, 4) holds the flat vertex
+    indices of a, b, c, d; ``radius`` (P,) the distance from a panel's centroid to its
+    farthest corner (constant: panels are rigid).
+    """
+
+    def __init__(self, pat: Pattern):
+        self.pat, self.N, self.M = pat, pat.N, pat.M
+        i, j = np.divmod(np.arange(self.N * self.M), self.M)
+        a = i * (self.M + 1) + j
+        self.ij = np.stack([i, j], axis=1)
+        self.corners = np.stack([a, a + self.M + 1, a + 1, a + self.M + 2], axis=1)
+        X = pat.X.reshape(-1, 3)
+        Q = X[self.corners]
+        self.radius = np.linalg.norm(Q - Q.mean(axis=1, keepdims=True), axis=2).max(axis=1)
+        self.scale = float(np.ptp(X, axis=0).max()) or 1.0
+
+    def states(self, omegas: np.ndarray) -> np.ndarray:
+        """Folded vertex positions (K, (N+1)(M+1), 3) at the omegas (K,)."""
+        return fold(self.pat, omegas).reshape(len(omegas), -1, 3)
+
+    def centres(self, Y: np.ndarray) -> np.ndarray:
+        """Panel centroids (..., P, 3) of states Y (..., V, 3)."""
+        return Y[..., self.corners, :].mean(axis=-2)
+
+    def non_adjacent(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Mask of the pairs that share no vertex (row or column apart by 2 or more)."""
+        d = np.abs(self.ij[p] - self.ij[q])
+        return d.max(axis=1) >= 2
+
+    def label(self, p: int, q: int) -> PanelPair:
+        """1-based panel pair, smaller panel first."""
+        a, b = sorted((int(p), int(q)))
+        return ((a // self.M + 1, a % self.M + 1), (b // self.M + 1, b % self.M + 1))
+
+
+def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
+    """Pairs (n, 2), p < q, sharing no vertex, whose spheres grown by ``reach`` overlap."""
+    r = 2 * geo.radius.max() + reach
+    pq = cKDTree(C).query_pairs(r, output_type="ndarray")
+    if pq.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    p, q = pq[:, 0], pq[:, 1]
+    keep = geo.non_adjacent(p, q) & (np.linalg.norm(C[p] - C[q], axis=1)
+                                     <= geo.radius[p] + geo.radius[q] + reach)
+    return pq[keep]
+
+
+def panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
+                   q: np.ndarray) -> np.ndarray:
+    """Distances (n,) between panels p and q (n,) in states S[s] (S: (K, V, 3)), 0 on
+    contact."""
+    P = S[s[:, None], geo.corners[p]]                               # (n, 4, 3)
+    Q = S[s[:, None], geo.corners[q]]
+    TP = P[:, _TRIANGLES][:, _TRI_PAIRS[:, 0]]                      # (n, 4, 3, 3)
+    TQ = Q[:, _TRIANGLES][:, _TRI_PAIRS[:, 1]]
+    TP, TQ = TP.reshape(-1, 3, 3), TQ.reshape(-1, 3, 3)
+    d = np.concatenate([triangle_distance(TP[k:k + CHUNK], TQ[k:k + CHUNK], geo.scale)
+                        for k in range(0, len(TP), CHUNK)] or [np.zeros(0)])
+    return d.reshape(-1, 4).min(axis=1)
+
+
+# --------------------------------------------------------------------------- triangles
+
+def triangles_intersect(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Whether closed triangles A and B (n, 3, 3) intersect, (n,) bool (separating axes).
+
+    Tested axes (17): both normals, the nine edge-edge cross products and the in-plane
+    normals of all six edges; gaps below REL_EPS * scale * |axis| count as touching.
+    """
+    eA = np.roll(A, -1, axis=1) - A
+    eB = np.roll(B, -1, axis=1) - B
+    nA = np.cross(eA[:, 0], eA[:, 1])
+    nB = np.cross(eB[:, 0], eB[:, 1])
+    axes = np.concatenate([
+        nA[:, None], nB[:, None],
+        np.cross(eA[:, :, None], eB[:, None, :]).reshape(-1, 9, 3),
+        np.cross(nA[:, None], eA), np.cross(nB[:, None], eB)], axis=1)  # (n, 17, 3)
+    pA = axes @ A.transpose(0, 2, 1)                                # (n, 17, 3)
+    pB = axes @ B.transpose(0, 2, 1)
+    eps = REL_EPS * scale * np.linalg.norm(axes, axis=2)
+    gap = np.maximum(pB.min(axis=2) - pA.max(axis=2), pA.min(axis=2) - pB.max(axis=2))
+    return ~np.any(gap > eps, axis=1)
+
+
+def triangle_distance(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Euclidean distances (n,) between closed triangles A and B (n, 3, 3), 0 if they meet."""
+    if len(A) == 0:
+        return np.zeros(0)
+    eA = np.roll(A, -1, axis=1)
+    eB = np.roll(B, -1, axis=1)
+    seg = _segment_distance(A[:, :, None], eA[:, :, None], B[:, None, :], eB[:, None, :])
+    d = seg.reshape(-1, 9).min(axis=1)
+    d = np.minimum(d, _vertex_face_distance(A, B).min(axis=1))
+    d = np.minimum(d, _vertex_face_distance(B, A).min(axis=1))
+    return np.where(triangles_intersect(A, B, scale), 0.0, d)
+
+
+def _segment_distance(P1, Q1, P2, Q2) -> np.ndarray:
+    """Distances between segments [P1, Q1] and [P2, Q2] (broadcast (..., 3)) (Ericson 5.1.9)."""
+    d1, d2, r = Q1 - P1, Q2 - P2, P1 - P2
+    a = np.sum(d1 * d1, axis=-1)
+    e = np.sum(d2 * d2, axis=-1)
+    b = np.sum(d1 * d2, axis=-1)
+    c = np.sum(d1 * r, axis=-1)
+    f = np.sum(d2 * r, axis=-1)
+    denom = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(denom > 1e-14 * a * e, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
+        t = (b * s + f) / e
+        s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
+    t = np.clip(t, 0, 1)
+    diff = r + d1 * s[..., None] - d2 * t[..., None]
+    return np.sqrt(np.sum(diff * diff, axis=-1))
+
+
+def _vertex_face_distance(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Distances (n, 3) from the vertices of A to the plane of B where the foot lies in B,
+    inf elsewhere (the other closest features are covered by segment distances)."""
+    n = np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
+    nn = np.sqrt(np.sum(n * n, axis=-1))
+    inside = np.ones(A.shape[:2], dtype=bool)
+    for k in range(3):
+        edge = B[:, (k + 1) % 3] - B[:, k]
+        side = (np.cross(edge[:, None], A - B[:, k, None]) @ n[:, :, None])[..., 0]
+        inside &= side >= 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = np.abs(((A - B[:, 0, None]) @ n[:, :, None])[..., 0]) / nn[:, None]
+    return np.where(inside & (nn[:, None] > 0), h, np.inf)
+
+
+# --------------------------------------------------------------------------- flat state
+
+def _flat_overlaps(geo: _Geometry) -> list[PanelPair]:
+    """Pairs of panels whose interiors overlap in the flat pattern (omega = 0)."""
+    X = geo.pat.X.reshape(-1, 3)[:, :2]
+    C = X[geo.corners].mean(axis=1)
+    pq = cKDTree(C).query_pairs(2 * geo.radius.max(), output_type="ndarray")
+    if pq.size == 0:
+        return []
+    ring = geo.corners[:, [0, 2, 3, 1]]                             # a, c, d, b around
+    P, Q = X[ring[pq[:, 0]]], X[ring[pq[:, 1]]]                     # (n, 4, 2)
+    edges = np.concatenate([np.roll(P, -1, axis=1) - P, np.roll(Q, -1, axis=1) - Q], axis=1)
+    axes = np.stack([-edges[..., 1], edges[..., 0]], axis=-1)       # (n, 8, 2)
+    pP = np.einsum("nak,nvk->nav", axes, P)
+    pQ = np.einsum("nak,nvk->nav", axes, Q)
+    eps = 1e-9 * geo.scale * np.linalg.norm(axes, axis=2)
+    gap = np.maximum(pQ.min(axis=2) - pP.max(axis=2), pP.min(axis=2) - pQ.max(axis=2))
+    hit = ~np.any(gap > -eps, axis=1)
+    return sorted(geo.label(p, q) for p, q in pq[hit])
+
+
+# --------------------------------------------------------------------------- motion
+
+def _first_contact(geo: _Geometry, w_max: float, clearance: float,
+                   tol: float) -> tuple[float | None, list[PanelPair]]:
+    """The earliest |omega| in [0, |w_max|] with two panels within ``clearance``, signed."""
+    sign = -1.0 if w_max < 0 else 1.0
+    W = abs(w_max)
+    n_steps = max(1, int(np.ceil(W / MAX_STEP)))
+    omegas = list(np.linspace(0.0, W, n_steps + 1))
+    Y = geo.states(sign * np.asarray(omegas))
+    C = geo.centres(Y)
+    margin = 2 * geo.radius.max() + clearance
+    near = [_near_pairs(geo, c, margin) for c in C]
+    S = Y
+    rows = _coarse_rows(geo, near, Y, C, clearance)
+    best, contact = np.inf, []
+    while rows.size:
+        ia, ib, p, q = rows.T
+        wa, wb = np.asarray(omegas)[ia], np.asarray(omegas)[ib]
+        keep = wa < best
+        rows, ia, ib, p, q, wa, wb = (x[keep] for x in (rows, ia, ib, p, q, wa, wb))
+        if not rows.size:
+            break
+        da, db, m = _step_bounds(geo, S, ia, ib, p, q)
+        m *= SAFETY
+        near = (da + db - m) / 2 <= clearance
+        both = np.concatenate([ia[near], ib[near]])
+        d = _exact(geo, S, both, np.tile(p[near], 2), np.tile(q[near], 2))
+        da[near], db[near] = d[:near.sum()], d[near.sum():]
+        for w_s, d_s in ((wa, da), (wb, db)):
+            hit = d_s <= clearance
+            if hit.any() and w_s[hit].min() <= best:
+                w_hit = w_s[hit].min()
+                at = hit & (w_s == w_hit)
+                new = [geo.label(a, b) for a, b in zip(p[at], q[at])]
+                contact = sorted(set(new + (contact if w_hit == best else [])))
+                best = w_hit
+        open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
+        rows, S = _split(geo, rows[open_], omegas, S, sign)
+    if not np.isfinite(best):
+        return None, []
+    return sign * float(best) if best > 0 else 0.0, contact
+
+
+def _step_bounds(geo: _Geometry, S, ia, ib, p, q) -> tuple[np.ndarray, ...]:
+    """Sphere lower bounds on the panel distances at states S[ia] and S[ib], and the
+    bound m (n,) on their relative vertex displacement between the two: the centres'
+    relative displacement plus each panel's largest vertex displacement about its centre."""
+    cp, cq = geo.corners[p], geo.corners[q]
+    Pa, Pb, Qa, Qb = S[ia[:, None], cp], S[ib[:, None], cp], S[ia[:, None], cq], S[ib[:, None], cq]
+    ca_p, cb_p, ca_q, cb_q = (X.mean(axis=1) for X in (Pa, Pb, Qa, Qb))
+    radii = geo.radius[p] + geo.radius[q]
+    lb_a = _norm(ca_p - ca_q) - radii
+    lb_b = _norm(cb_p - cb_q) - radii
+    up, uq = cb_p - ca_p, cb_q - ca_q
+    m = (_norm(up - uq) + _norm(Pb - Pa - up[:, None]).max(axis=1)
+         + _norm(Qb - Qa - uq[:, None]).max(axis=1))
+    return lb_a, lb_b, m
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms over the last axis."""
+    return np.sqrt(np.sum(v * v, axis=-1))
+
+
+def _exact(geo: _Geometry, S, s, p, q) -> np.ndarray:
+    """Panel distances (n,) in states S[s], each distinct (state, pair) computed once."""
+    code = (s * geo.N * geo.M + p) * geo.N * geo.M + q
+    uniq, inv = np.unique(code, return_inverse=True)
+    first = np.zeros(len(uniq), dtype=np.int64)
+    first[inv.ravel()] = np.arange(len(code))
+    return panel_distance(geo, S, s[first], p[first], q[first])[inv.ravel()]
+
+
+def _coarse_rows(geo: _Geometry, near: list[np.ndarray], Y: np.ndarray, C: np.ndarray,
+                 clearance: float) -> np.ndarray:
+    """Rows (n, 4) = (state a, state b, p, q): the candidate pairs of every coarse step
+    that the sphere bounds do not certify clear (see :func:`_step_bounds`), from the coarse
+    states Y (K, V, 3) and their panel centres C (K, P, 3)."""
+    P = geo.N * geo.M
+    dC = C[1:] - C[:-1]                                              # (K-1, P, 3)
+    spin = _norm(Y[1:, geo.corners] - Y[:-1, geo.corners] - dC[:, :, None]).max(axis=2)
+    out = []
+    for k in range(len(near) - 1):
+        code = np.unique(np.concatenate([near[k][:, 0] * P + near[k][:, 1],
+                                         near[k + 1][:, 0] * P + near[k + 1][:, 1]]))
+        p, q = np.divmod(code, P)
+        radii = geo.radius[p] + geo.radius[q]
+        m = SAFETY * (_norm(dC[k, p] - dC[k, q]) + spin[k, p] + spin[k, q])
+        lb = _norm(C[k, p] - C[k, q]) + _norm(C[k + 1, p] - C[k + 1, q]) - 2 * radii
+        keep = (lb - m) / 2 <= clearance
+        p, q = p[keep], q[keep]
+        out.append(np.stack([np.full_like(p, k), np.full_like(p, k + 1), p, q], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 4), dtype=np.int64)
+
+
+def _split(geo: _Geometry, rows: np.ndarray, omegas: list, S: np.ndarray,
+           sign: float) -> tuple[np.ndarray, np.ndarray]:
+    """Halve the steps of ``rows``: the child rows and the states S (K, V, 3) with the
+    midpoint states appended (their omegas appended to ``omegas``)."""
+    if not rows.size:
+        return rows, S
+    steps, inv = np.unique(rows[:, :2], axis=0, return_inverse=True)
+    inv = inv.ravel()
+    w = np.asarray(omegas)
+    mids = (w[steps[:, 0]] + w[steps[:, 1]]) / 2
+    first = len(omegas)
+    omegas.extend(mids.tolist())
+    S = np.concatenate([S, geo.states(sign * mids)])
+    mid = first + inv
+    left = np.stack([rows[:, 0], mid, rows[:, 2], rows[:, 3]], axis=1)
+    right = np.stack([mid, rows[:, 1], rows[:, 2], rows[:, 3]], axis=1)
+    return np.concatenate([left, right]), S

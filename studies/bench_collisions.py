@@ -1,0 +1,108 @@
+"""Benchmark of the self-contact check against one march-and-fold of 100 states (issue 20).
+
+For N x N panels (default 20 and 100) and two patterns, a Miura-ori (alpha0 = 1.2,
+a = b = 1) and the same with boundary angles perturbed (``rq.perturb_angles``, the first
+seed from 0 whose pattern marches with the Miura lengths, amplitude ``--amplitude``), it
+times in one run
+
+* ``march+fold``  ``numpy_model.fold(numpy_model.march(bd), np.linspace(0, omega*, 100))``;
+* ``collisions``  ``collisions(pattern, omega*)`` on the marched pattern,
+
+and reports their ratio (the issue's goal: at most 2 at 100 x 100). Times are CPU seconds
+of this process (``time.process_time``), so other jobs on a shared machine do not inflate
+them. Results are printed and written as Markdown.
+
+Usage: ``python studies/bench_collisions.py [--sizes 20,100] [--omega 2.0]
+[--amplitude 0.01] [--out studies/results/bench_collisions.md]``;
+``--smoke``: 4 x 4 panels, output to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import rffqm_nlp as rq
+from rffqm_nlp import numpy_model as nm
+from rffqm_nlp.collisions import collisions
+from rffqm_nlp.errors import MarchingError
+
+ROOT = Path(__file__).resolve().parent.parent
+DATE = "2026-12-01"
+COLUMNS = ("panels", "pattern", "omega*", "march+fold [s]", "collisions [s]", "ratio",
+           "free", "first_omega")
+
+
+def perturbed(n: int, amplitude: float) -> tuple[rq.BoundaryData, int]:
+    """A Miura boundary of n x n panels with perturbed angles that marches, and its seed."""
+    miura = rq.miura_boundary(n, n, alpha0=1.2)
+    for seed in range(200):
+        bd = rq.perturb_angles(miura, amplitude * np.pi, seed)
+        try:
+            nm.march(bd)
+        except MarchingError:
+            continue
+        return bd, seed
+    raise SystemExit(f"no seed in 0..199 marches at {n} x {n}; lower --amplitude")
+
+
+def cpu(f):
+    """(result, CPU seconds) of f()."""
+    t = time.process_time()
+    out = f()
+    return out, time.process_time() - t
+
+
+def row(n: int, name: str, bd: rq.BoundaryData, omega: float) -> dict:
+    """One table row: both timings on the same pattern."""
+    _, t_fold = cpu(lambda: nm.fold(nm.march(bd), np.linspace(0, omega, 100)))
+    pat = nm.march(bd)
+    rep, t_col = cpu(lambda: collisions(pat, omega))
+    first = "-" if rep.first_omega is None else f"{rep.first_omega:.4f}"
+    return {"panels": f"{n} x {n}", "pattern": name, "omega*": f"{omega:g}",
+            "march+fold [s]": f"{t_fold:.2f}", "collisions [s]": f"{t_col:.2f}",
+            "ratio": f"{t_col / t_fold:.1f}", "free": str(rep.free), "first_omega": first}
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown table of the rows."""
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(r[c] for c in COLUMNS) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="20,100")
+    ap.add_argument("--omega", type=float, default=2.0)
+    ap.add_argument("--amplitude", type=float, default=0.01, help="perturbation / pi")
+    ap.add_argument("--out", type=Path, default=ROOT / "studies/results/bench_collisions.md")
+    ap.add_argument("--smoke", action="store_true")
+    args = ap.parse_args()
+    sizes = [4] if args.smoke else [int(s) for s in args.sizes.split(",")]
+    out = Path(tempfile.mkdtemp()) / "bench_collisions.md" if args.smoke else args.out
+    rows = []
+    for n in sizes:
+        bd, seed = perturbed(n, args.amplitude)
+        for name, b in (("Miura", rq.miura_boundary(n, n, alpha0=1.2)),
+                        (f"perturbed {args.amplitude:g} pi, seed {seed}", bd)):
+            rows.append(row(n, name, b, args.omega))
+            print(table(rows[-1:]).splitlines()[-1], flush=True)
+    text = (f"# Self-contact check against march-and-fold ({DATE})\n\n"
+            f"`python studies/bench_collisions.py --sizes {','.join(map(str, sizes))} "
+            f"--omega {args.omega:g} --amplitude {args.amplitude:g}`; CPU seconds of one "
+            "process. march+fold: `fold(march(bd), linspace(0, omega*, 100))`; collisions: "
+            "`collisions(pattern, omega*)` (clearance 0, tol 1e-4). Goal (issue 20): "
+            "ratio <= 2 at 100 x 100.\n\n" + table(rows) + "\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(table(rows))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

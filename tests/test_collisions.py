@@ -1,0 +1,214 @@
+"""Self-contact checks: narrow phase against a brute-force reference, the Miura-ori free,
+a z-fold contact computed by hand, refinement, clearance, the paper's random recipe
+(checked against a dense brute-force scan of every pair)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import minimize
+
+import rffqm_nlp as rq
+from rffqm_nlp import numpy_model as nm
+from rffqm_nlp.collisions import (CollisionReport, _Geometry, collisions, panel_distance,
+                                  triangle_distance, triangles_intersect)
+from rffqm_nlp.errors import InputError
+from rffqm_nlp.lengths import side_length_lp
+
+
+def miura(n: int, m: int, alpha0: float = 1.2, layout: str = "zigzag_j") -> rq.Pattern:
+    return nm.march(rq.miura_boundary(n, m, alpha0=alpha0, layout=layout))
+
+
+def reference_distance(A: np.ndarray, B: np.ndarray) -> float:
+    """Triangle distance as a small QP over barycentric coordinates (SLSQP, several starts)."""
+    def f(x):
+        return np.sum((x[:3] @ A - x[3:] @ B) ** 2)
+
+    cons = [{"type": "eq", "fun": lambda x: x[:3].sum() - 1},
+            {"type": "eq", "fun": lambda x: x[3:].sum() - 1}]
+    best = np.inf
+    for start in (np.full(6, 1 / 3), np.r_[1, 0, 0, 0, 1, 0], np.r_[0, 0, 1, 1, 0, 0]):
+        res = minimize(f, start.astype(float), method="SLSQP", bounds=[(0, 1)] * 6,
+                       constraints=cons, options={"ftol": 1e-14, "maxiter": 500})
+        best = min(best, f(np.clip(res.x, 0, 1)))
+    return float(np.sqrt(max(best, 0.0)))
+
+
+def all_pair_distances(pat: rq.Pattern, omega: float) -> dict:
+    """Every pair of panels sharing no vertex -> their distance (O(n^2) reference)."""
+    geo = _Geometry(pat)
+    P = pat.N * pat.M
+    p, q = np.triu_indices(P, 1)
+    keep = geo.non_adjacent(p, q)
+    p, q = p[keep], q[keep]
+    Y = geo.states(np.array([omega]))
+    d = panel_distance(geo, Y, np.zeros(len(p), dtype=int), p, q)
+    return {geo.label(a, b): float(x) for a, b, x in zip(p, q, d)}
+
+
+coord = st.floats(-2, 2, allow_nan=False, allow_infinity=False)
+triangle = st.lists(coord, min_size=9, max_size=9).map(lambda v: np.reshape(v, (3, 3)))
+
+
+def well_shaped(T: np.ndarray) -> bool:
+    e = np.roll(T, -1, axis=0) - T
+    area = np.linalg.norm(np.cross(e[0], e[1]))
+    return area > 0.05 * max(np.sum(e * e, axis=1).max(), 1e-12)
+
+
+# --------------------------------------------------------------------------- narrow phase
+
+@settings(max_examples=150, deadline=None)
+@given(triangle, triangle)
+def test_triangle_distance_matches_reference(A, B):
+    if not (well_shaped(A) and well_shaped(B)):
+        return
+    d = triangle_distance(A[None], B[None])[0]
+    ref = reference_distance(A, B)
+    assert d == pytest.approx(ref, abs=2e-5)
+    hit = triangles_intersect(A[None], B[None])[0]
+    assert hit == (d == 0.0)
+    if ref > 1e-4:
+        assert not hit
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle, st.floats(-1, 1), st.floats(0.0, 0.6), st.floats(0.0, 0.6))
+def test_coplanar_triangles(A, shift, u, v):
+    """A triangle and a copy moved within its plane by barycentric steps: they meet iff
+    the reference distance is zero."""
+    if not well_shaped(A):
+        return
+    B = A + shift * (u * (A[1] - A[0]) + v * (A[2] - A[0]))
+    d = triangle_distance(A[None], B[None])[0]
+    assert d == pytest.approx(reference_distance(A, B), abs=2e-5)
+
+
+def test_piercing_triangles_intersect():
+    A = np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0]], dtype=float)
+    B = np.array([[1, 1, -1], [1, 1, 1], [5, 5, 3]], dtype=float)   # an edge through A
+    assert triangles_intersect(A[None], B[None])[0]
+    assert triangle_distance(A[None], B[None])[0] == 0.0
+
+
+# --------------------------------------------------------------------------- the motion
+
+@pytest.mark.parametrize("n, m, alpha0, layout", [(3, 3, 1.2, "zigzag_j"),
+                                                  (5, 4, 0.7, "zigzag_j"),
+                                                  (4, 6, 1.0, "zigzag_i")])
+def test_miura_free_up_to_folded_flat(n, m, alpha0, layout):
+    pat = miura(n, m, alpha0, layout)
+    for omega in (np.pi - 1e-3, -(np.pi - 1e-3)):
+        rep = collisions(pat, omega)
+        assert rep.free and rep.first_omega is None and rep.pairs == []
+        assert rep.flat_overlaps == []
+
+
+def zfold_contact(clearance: float, alpha0: float = 1.1, b: float = 1.0):
+    """A 1 x 3 Miura row is a z-fold: panels (1, 1) and (1, 3) are parallel translates.
+    Past a crease angle of pi/2 their distance is the plane gap w sin|gamma| with
+    w = b sin(alpha0) the width of panel (1, 2); contact at sin|gamma| = clearance / w."""
+    pat = nm.march(rq.miura_boundary(1, 3, a=3.0, b=b, alpha0=alpha0))
+    w = b * np.sin(alpha0)
+    gamma = np.pi - np.arcsin(clearance / w)
+    _, gv = nm.fold_angles(pat, 1.0)
+    k = np.tan(gv[0, 1] / 2) / np.tan(0.5)                            # tan(g/2) = k tan(w/2)
+    omega = 2 * np.arctan(np.tan(gamma / 2) / abs(k))
+    return pat, omega, w
+
+
+def test_zfold_contact_by_hand():
+    pat, omega_star, w = zfold_contact(0.3)
+    dist = all_pair_distances(pat, omega_star)
+    assert dist[((1, 1), (1, 3))] == pytest.approx(0.3, abs=1e-9)    # the formula holds
+    rep = collisions(pat, np.pi, clearance=0.3)
+    assert not rep.free and rep.pairs == [((1, 1), (1, 3))]
+    assert omega_star <= rep.first_omega <= omega_star + 1e-4
+    neg = collisions(pat, -np.pi, clearance=0.3)
+    assert neg.first_omega == pytest.approx(-rep.first_omega, abs=1e-4)
+
+
+def test_zfold_touches_only_when_folded_flat():
+    pat, _, _ = zfold_contact(0.3)
+    assert collisions(pat, np.pi - 1e-3).free
+    rep = collisions(pat, np.pi)
+    assert rep.pairs == [((1, 1), (1, 3))]
+    assert rep.first_omega == pytest.approx(np.pi, abs=1e-4)
+
+
+def test_first_omega_stable_under_refinement():
+    pat, _, _ = zfold_contact(0.2, alpha0=0.8)
+    coarse = collisions(pat, 3.0, clearance=0.2, tol=1e-4).first_omega
+    fine = collisions(pat, 3.0, clearance=0.2, tol=1e-6).first_omega
+    assert coarse is not None and abs(coarse - fine) <= 1e-4
+
+
+def test_clearance_is_kept_until_first_contact():
+    pat = miura(3, 4, alpha0=0.9)
+    c = 0.2
+    rep = collisions(pat, np.pi - 1e-3, clearance=c, tol=1e-6)
+    assert rep.first_omega is not None and rep.pairs
+    at = all_pair_distances(pat, rep.first_omega)
+    for pair in rep.pairs:
+        assert at[pair] == pytest.approx(c, abs=1e-4)
+    before = all_pair_distances(pat, rep.first_omega - 1e-5)
+    assert min(before.values()) >= c - 1e-9
+    dense = np.linspace(0, rep.first_omega - 1e-5, 200)
+    assert min(min(all_pair_distances(pat, w).values()) for w in dense) >= c - 1e-9
+
+
+def test_flat_overlaps_of_a_fabricated_pattern():
+    """Panel (1, 3) moved onto panel (1, 1) in the flat pattern overlaps it (and (1, 2))."""
+    pat = miura(1, 4)
+    X = np.array(pat.X)
+    X[:, 2:4] = X[:, 0:2]
+    fake = rq.Pattern(alpha=pat.alpha, beta=pat.beta, sigma=pat.sigma, lh=pat.lh,
+                      lv=pat.lv, mu=pat.mu, X=X)
+    rep = collisions(fake, 0.0)
+    assert ((1, 1), (1, 3)) in rep.flat_overlaps and not rep.free
+    assert collisions(pat, 0.0).flat_overlaps == []
+
+
+def test_report_to_dict_and_inputs():
+    rep = collisions(miura(2, 2), 1.0)
+    assert isinstance(rep, CollisionReport)
+    assert rep.to_dict() == {"free": True, "first_omega": None, "pairs": [],
+                             "flat_overlaps": [], "omega_max": 1.0, "clearance": 0.0}
+    for kw in ({"omega_max": 4.0}, {"omega_max": 1.0, "clearance": -1.0},
+               {"omega_max": 1.0, "tol": 0.0}):
+        with pytest.raises(InputError):
+            collisions(miura(2, 2), **kw)
+
+
+# --------------------------------------------------------------------------- paper's recipe
+
+def random_recipe(seed: int) -> rq.Pattern:
+    """The paper's Fig. Random recipe at 10 x 10: Miura angles +-0.1 pi, LP side lengths."""
+    bd = rq.perturb_angles(rq.miura_boundary(10, 10), 0.1 * np.pi, seed)
+    return nm.march(side_length_lp(bd))
+
+
+def dense_min(pat: rq.Pattern, omegas: np.ndarray) -> float:
+    """Smallest distance over every pair sharing no vertex and every omega (brute force)."""
+    return min(min(all_pair_distances(pat, w).values()) for w in omegas)
+
+
+@pytest.mark.parametrize("seed, clearance, omega_max", [(29, 0.003, 2.5), (22, 0.0015, 3.0)])
+def test_random_recipe_contact_agrees_with_dense_scan(seed, clearance, omega_max):
+    pat = random_recipe(seed)
+    rep = collisions(pat, omega_max, clearance=clearance)
+    assert not rep.free and rep.first_omega is not None and rep.pairs
+    at = all_pair_distances(pat, rep.first_omega)
+    for pair in rep.pairs:
+        assert clearance - 1e-4 <= at[pair] <= clearance
+    dense = np.linspace(0, rep.first_omega - 1e-4, 40)
+    assert dense_min(pat, dense) > clearance
+
+
+def test_random_recipe_free_agrees_with_dense_scan():
+    pat = random_recipe(22)
+    assert collisions(pat, 2.0).free
+    assert dense_min(pat, np.linspace(0, 2.0, 40)) > 0
