@@ -529,7 +529,7 @@ class DesignProblem:
         self._check_constraints(pattern, stats, x)
         R, t, _ = shape.kabsch(Y[::2, ::2], start.target_points)
         folded = Y @ R.T + t
-        fit = Fit(**design_fit(folded[::2, ::2], start.target_points, self.target),
+        fit = Fit(**design_fit(folded, start.target_points, self.target),
                   min_side_over_mean=float(pattern.side_lengths.min()
                                            / pattern.side_lengths.mean()),
                   min_sector_angle=float(pattern.sector_angles.min()))
@@ -604,18 +604,18 @@ def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
     return from_config(read_toml(path, "design file"))
 
 
-def design_fit(coarse: np.ndarray, target_points: np.ndarray,
+def design_fit(folded: np.ndarray, target_points: np.ndarray,
                target: surfaces.Surface) -> dict[str, float]:
-    """Fit measures of an aligned coarse lattice (N+1, M+1, 3) against the target lattice
-    (N+1, M+1, 3), relative to the target's diameter: ``rms``, ``rms_surface``,
-    ``hausdorff`` and ``plane_rms`` as :class:`~rffqm_nlp.results.Fit` defines them."""
+    """Fit measures of an aligned folded state (2N+1, 2M+1, 3) against the target lattice
+    (N+1, M+1, 3) and the target's shape (:func:`rffqm_nlp.shape.shape_fit`), relative to
+    the target's diameter, as :class:`~rffqm_nlp.results.Fit` defines them (all but the
+    pattern's side and angle measures)."""
     diameter = target.diameter()
-    rms = float(np.sqrt(np.mean(np.sum((coarse - target_points) ** 2, axis=-1))))
+    rms = float(np.sqrt(np.mean(np.sum((folded[::2, ::2] - target_points) ** 2, axis=-1))))
     pts = target_points.reshape(-1, 3)
     plane = np.linalg.svd(pts - pts.mean(0), compute_uv=False)[-1] / np.sqrt(len(pts))
-    surface = shape.relative_fit(coarse, target)
-    return {"rms": rms / diameter, "rms_surface": surface["rms"],
-            "hausdorff": surface["hausdorff"], "plane_rms": float(plane / diameter)}
+    return {"rms": rms / diameter, "plane_rms": float(plane / diameter),
+            **shape.shape_fit(folded, target)}
 
 
 # ---------------------------------------------------------------------- solve steps

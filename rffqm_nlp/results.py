@@ -34,11 +34,18 @@ class Fit:
     * ``rms``: RMS distance of the aligned coarse lattice to the target lattice
       (corresponding points);
     * ``rms_surface``, ``hausdorff``: RMS and largest distance of the coarse lattice to the
-      target surface;
+      target's shape (exact closest points on r(u, v) over the domain, or on the mesh of a
+      :class:`~rffqm_nlp.meshes.Mesh`);
+    * ``rms_surface_vertices``, ``hausdorff_vertices``: the same for every folded vertex;
+    * ``coverage``: the area of the coarse lattice (two triangles per cell) over the area of
+      r(u, v) over the target's domain (:func:`rffqm_nlp.shape.surface_area`);
     * ``plane_rms``: RMS distance of the target lattice to its best-fitting plane (the fit a
       flat sheet reaches, for comparison);
     * ``min_side_over_mean``: the smallest side length over the mean side length;
     * ``min_sector_angle``: the smallest sector angle (radians).
+
+    The three shape fits added with meshes as targets are None in a result saved before
+    them (not measured).
     """
 
     rms: float
@@ -47,19 +54,25 @@ class Fit:
     plane_rms: float
     min_side_over_mean: float
     min_sector_angle: float
+    rms_surface_vertices: float | None = None
+    hausdorff_vertices: float | None = None
+    coverage: float | None = None
 
-    def to_dict(self) -> dict[str, float]:
-        """{field: value}, JSON-ready."""
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+    def to_dict(self) -> dict[str, float | None]:
+        """{field: value}, JSON-ready (None for a shape fit not measured)."""
+        return {f.name: None if getattr(self, f.name) is None else float(getattr(self, f.name))
+                for f in fields(self)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Fit":
-        """Inverse of :meth:`to_dict`; every field must be present."""
-        return cls(**{f.name: float(_required(d, f.name, "fit")) for f in fields(cls)})
+        """Inverse of :meth:`to_dict`; every field without a default must be present."""
+        values = {f.name: _required(d, f.name, "fit") for f in fields(cls)
+                  if f.default is MISSING or d.get(f.name) is not None}
+        return cls(**{name: float(value) for name, value in values.items()})
 
     def is_finite(self) -> bool:
-        """Whether every measure is a finite number."""
-        return bool(np.all(np.isfinite(list(self.to_dict().values()))))
+        """Whether every measure that was measured is a finite number."""
+        return bool(np.all(np.isfinite([v for v in self.to_dict().values() if v is not None])))
 
 
 @dataclass(frozen=True)

@@ -241,3 +241,55 @@ def relative_fit(points: Any, target: Surface | Any) -> dict[str, float]:
         raise InputError("the target has zero diameter, so a relative fit is undefined")
     return {"rms": rms_distance(points, target) / diameter,
             "hausdorff": hausdorff_distance(points, target) / diameter}
+
+
+# -- areas --------------------------------------------------------------------------------
+
+#: Composite Gauss-Legendre rule of :func:`surface_area`: cells per direction, nodes per cell.
+AREA_CELLS, AREA_ORDER = 32, 4
+
+
+def lattice_area(P: Any) -> float:
+    """Area of the lattice (n, m, 3) as a surface of two triangles per cell (each cell split
+    along its diagonal (i, j)-(i+1, j+1))."""
+    flat, shape = _points(P, "lattice")
+    if len(shape) != 3:
+        raise InputError(f"lattice_area needs an (n, m, 3) lattice, got shape {shape}")
+    pts = flat.reshape(shape)
+    a, b, c, d = pts[:-1, :-1], pts[1:, :-1], pts[1:, 1:], pts[:-1, 1:]
+    first = np.linalg.norm(np.cross(b - a, c - a), axis=-1)
+    second = np.linalg.norm(np.cross(c - a, d - a), axis=-1)
+    return float(0.5 * (first.sum() + second.sum()))
+
+
+def surface_area(target: Surface) -> float:
+    """Area of r(u, v) over the target's domain: the integral of |r_u x r_v| by a composite
+    Gauss-Legendre rule (:data:`AREA_CELLS` cells of :data:`AREA_ORDER` nodes per direction)
+    with the surface's exact derivatives. For a :class:`~rffqm_nlp.meshes.Mesh` this is the
+    area of its fitted spline over the domain."""
+    nodes, weights = np.polynomial.legendre.leggauss(AREA_ORDER)
+    (u0, u1), (v0, v1) = target.domain
+
+    def rule(lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+        edges = np.linspace(lo, hi, AREA_CELLS + 1)
+        half = np.diff(edges)[:, None] / 2
+        x = (edges[:-1, None] + half) + half * nodes[None, :]
+        return x.ravel(), (half * weights[None, :]).ravel()
+
+    (u, wu), (v, wv) = rule(u0, u1), rule(v0, v1)
+    r_u, r_v = target.derivatives(u[:, None], v[None, :])
+    return float(np.sum(np.linalg.norm(np.cross(r_u, r_v), axis=-1) * wu[:, None] * wv[None, :]))
+
+
+def shape_fit(folded: np.ndarray, target: Surface) -> dict[str, float]:
+    """Fits of an aligned folded state (2N+1, 2M+1, 3) against the target's shape (closest
+    points on the surface, or on the mesh for a :class:`~rffqm_nlp.meshes.Mesh`), over the
+    diameter: ``rms_surface``, ``hausdorff`` of the coarse lattice ``folded[::2, ::2]``,
+    ``rms_surface_vertices``, ``hausdorff_vertices`` of every vertex, and ``coverage``: the
+    coarse lattice's :func:`lattice_area` over the target's :func:`surface_area`."""
+    coarse = folded[::2, ::2]
+    lattice = relative_fit(coarse, target)
+    vertices = relative_fit(folded.reshape(-1, 3), target)
+    return {"rms_surface": lattice["rms"], "hausdorff": lattice["hausdorff"],
+            "rms_surface_vertices": vertices["rms"], "hausdorff_vertices": vertices["hausdorff"],
+            "coverage": lattice_area(coarse) / surface_area(target)}

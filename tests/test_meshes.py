@@ -233,3 +233,25 @@ def test_bad_files_raise_one_line(tmp_path, name, content, found):
         Mesh(path)
     message = str(info.value)
     assert "\n" not in message and re.search(found, message)
+
+
+def test_a_design_on_a_mesh_is_judged_against_the_mesh(tmp_path):
+    surface = rq.surfaces.get("sphere_cap", radius=4.0, domain=[[-0.6, 0.6], [-0.6, 0.6]])
+    surface.mesh(41, 41).export(tmp_path / "cap.stl")
+    target = Mesh(tmp_path / "cap.stl")
+    # its spline's area over the domain lies between the areas of the mesh's faces wholly
+    # inside the domain and of those touching it
+    (u0, u1), (v0, v1) = target.domain
+    uv = target.uv[target.mesh.faces]
+    inside = (uv[..., 0] >= u0) & (uv[..., 0] <= u1) & (uv[..., 1] >= v0) & (uv[..., 1] <= v1)
+    faces = target.mesh.area_faces
+    assert faces[inside.all(1)].sum() < rq.shape.surface_area(target) < faces[inside.any(1)].sum()
+    result = rq.DesignProblem(target, panels=(8, 8)).solve(rq.SolveOptions(max_iter=30))
+    fit = result.fit
+    assert (fit.rms_surface, fit.hausdorff) == pytest.approx(shape_distances(target, result.coarse),
+                                                             rel=1e-12)
+    assert (fit.rms_surface_vertices, fit.hausdorff_vertices) == pytest.approx(
+        shape_distances(target, result.folded), rel=1e-12)
+    assert fit.coverage == pytest.approx(
+        rq.shape.lattice_area(result.coarse) / rq.shape.surface_area(target), rel=1e-12)
+    assert 0.9 < fit.coverage < 1.1 and fit.rms_surface < 0.25 * fit.plane_rms

@@ -45,6 +45,18 @@ def test_fit_and_stats_round_trip_through_dicts(result):
         Fit.from_dict({k: v for k, v in result.fit.to_dict().items() if k != "hausdorff"})
 
 
+def test_shape_fits_are_measured_and_optional_in_older_files(result):
+    fit = result.fit
+    assert fit.rms_surface_vertices is not None and fit.hausdorff_vertices is not None
+    assert 0 < fit.rms_surface_vertices <= fit.hausdorff_vertices
+    assert 0.5 < fit.coverage < 1.5
+    new = ("rms_surface_vertices", "hausdorff_vertices", "coverage")
+    older = Fit.from_dict({k: v for k, v in fit.to_dict().items() if k not in new})
+    assert older.coverage is None and older.is_finite()
+    assert older.to_dict()["coverage"] is None and Fit.from_dict(older.to_dict()) == older
+    assert not replace(fit, coverage=float("inf")).is_finite()
+
+
 def test_nan_in_the_pattern_is_refused_naming_the_key(result, tmp_path):
     data = result.to_dict()
     data["pattern"]["X"][1][2][0] = float("nan")

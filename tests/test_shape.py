@@ -216,3 +216,58 @@ def test_point_set_distances():
     diameter = max(np.linalg.norm(p - q) for p in A for q in A)
     assert fit["hausdorff"] == pytest.approx(sh.hausdorff_distance(B, A) / diameter)
     assert fit["rms"] == pytest.approx(sh.rms_distance(B, A) / diameter)
+
+
+# -- areas and fits against the shape -------------------------------------------------------
+
+
+def test_lattice_area_of_a_flat_sheet_and_a_bent_one():
+    u, v = np.meshgrid(np.linspace(0, 3, 4), np.linspace(0, 2, 5), indexing="ij")
+    flat = np.stack([u, v, np.zeros_like(u)], -1)
+    assert sh.lattice_area(flat) == pytest.approx(6.0, rel=1e-14)
+    # a sheet bent along its diagonal: the two triangles of a cell are counted separately
+    cell = np.array([[[0, 0, 0], [0, 1, 0]], [[1, 0, 0], [1, 1, 1]]], dtype=float)
+    assert sh.lattice_area(cell) == pytest.approx(2 * 0.5 * np.sqrt(2), rel=1e-14)
+    with pytest.raises(InputError, match=r"\(n, m, 3\) lattice"):
+        sh.lattice_area(flat.reshape(-1, 3))
+
+
+@pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "torus_patch", "plane"])
+def test_surface_area_agrees_with_a_fine_mesh(name):
+    surface = S.get(name)
+    assert sh.surface_area(surface) == pytest.approx(surface.mesh(801, 801).area, rel=2e-5)
+
+
+def test_sphere_cap_area_is_exact():
+    """The gnomonic cap over (-a, a)^2 is a spherical quadrilateral (its sides are great
+    circles): area R^2 (sum of its four corner angles - 2 pi)."""
+    R, a = 4.0, 0.6
+    cap = S.get("sphere_cap", radius=R, domain=[[-a, a], [-a, a]])
+    corners = cap.point(np.array([-a, a, a, -a]), np.array([-a, -a, a, a])) / R
+    angles = []
+    for k in range(4):
+        p, q, s = corners[k], corners[k - 1], corners[(k + 1) % 4]
+        t1, t2 = q - np.dot(q, p) * p, s - np.dot(s, p) * p
+        angles.append(np.arccos(np.dot(t1, t2) / np.linalg.norm(t1) / np.linalg.norm(t2)))
+    assert sh.surface_area(cap) == pytest.approx(R ** 2 * (sum(angles) - 2 * np.pi), rel=1e-10)
+
+
+def test_shape_fit_of_the_surface_itself_and_of_an_offset():
+    surface = S.get("sphere_cap")
+    (u0, u1), (v0, v1) = surface.domain
+    u, v = np.linspace(u0, u1, 17), np.linspace(v0, v1, 13)
+    on = surface.point(u[:, None], v[None, :])
+    fit = sh.shape_fit(on, surface)
+    assert max(fit["rms_surface"], fit["hausdorff"], fit["rms_surface_vertices"],
+               fit["hausdorff_vertices"]) < 1e-9
+    assert fit["coverage"] == pytest.approx(sh.lattice_area(on[::2, ::2]) / sh.surface_area(surface))
+    assert 0.99 < fit["coverage"] < 1.0  # the chords of a convex cap cut it short
+    # the coarse lattice on the surface, the fine vertices in between lifted off it
+    off = on + 0.02 * surface.normal(u[:, None], v[None, :])
+    off[::2, ::2] = on[::2, ::2]
+    fit = sh.shape_fit(off, surface)
+    assert fit["rms_surface"] < 1e-9
+    assert fit["hausdorff_vertices"] == pytest.approx(0.02 / surface.diameter(), rel=1e-6)
+    share = 1 - (9 * 7) / (17 * 13)
+    assert fit["rms_surface_vertices"] == pytest.approx(
+        np.sqrt(share) * 0.02 / surface.diameter(), rel=1e-6)
