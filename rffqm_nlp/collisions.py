@@ -18,13 +18,16 @@ Method.
   smallest of their four triangle pairs.
 * Broad phase: a :class:`scipy.spatial.cKDTree` on panel centres at each coarse sample;
   candidate pairs are the panels whose bounding spheres, grown by the clearance and a
-  margin of one panel diameter, overlap at either end of a coarse step.
+  margin of the largest panel radius, overlap at either end of a coarse step.
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair is certified clear when
   (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance and m bounds how far
   the pair's distance can change over the step: SAFETY times the largest relative
   displacement of a vertex of one panel against a vertex of the other between w0 and w1
   (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex).
+  Distances are first bounded from below cheaply (centre distance minus radii, and how
+  far one panel lies on one side of the other's plane); the exact distance is computed
+  only where that bound does not certify the step.
   Uncertified pairs are followed into the halves of the step (one batched fold per
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
@@ -53,7 +56,7 @@ from .numpy_model import fold
 from .pattern import Pattern, check_omega
 
 #: Largest coarse step in omega.
-MAX_STEP = 0.05
+MAX_STEP = 0.1
 #: Factor on a step's relative vertex displacement (chord) bounding its path.
 SAFETY = 2.0
 #: Separating-axis gaps below this times the pattern's scale count as touching.
@@ -284,7 +287,7 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
     omegas = list(np.linspace(0.0, W, n_steps + 1))
     Y = geo.states(sign * np.asarray(omegas))
     C = geo.centres(Y)
-    margin = 2 * geo.radius.max() + clearance
+    margin = geo.radius.max() + clearance
     near = [_near_pairs(geo, c, margin) for c in C]
     S = Y
     rows = _coarse_rows(geo, near, Y, C, clearance)
@@ -325,12 +328,24 @@ def _step_bounds(geo: _Geometry, S, ia, ib, p, q) -> tuple[np.ndarray, ...]:
     Pa, Pb, Qa, Qb = S[ia[:, None], cp], S[ib[:, None], cp], S[ia[:, None], cq], S[ib[:, None], cq]
     ca_p, cb_p, ca_q, cb_q = (X.mean(axis=1) for X in (Pa, Pb, Qa, Qb))
     radii = geo.radius[p] + geo.radius[q]
-    lb_a = _norm(ca_p - ca_q) - radii
-    lb_b = _norm(cb_p - cb_q) - radii
+    lb_a = np.maximum(_norm(ca_p - ca_q) - radii, _plane_gap(Pa, Qa))
+    lb_b = np.maximum(_norm(cb_p - cb_q) - radii, _plane_gap(Pb, Qb))
     up, uq = cb_p - ca_p, cb_q - ca_q
     m = (_norm(up - uq) + _norm(Pb - Pa - up[:, None]).max(axis=1)
          + _norm(Qb - Qa - uq[:, None]).max(axis=1))
     return lb_a, lb_b, m
+
+
+def _plane_gap(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Lower bounds (n,) on the distance of planar panels P, Q (n, 4, 3): how far one lies
+    wholly on one side of the other's plane (0 where neither does)."""
+    gap = np.zeros(len(P))
+    for A, B in ((P, Q), (Q, P)):
+        n = np.cross(A[:, 3] - A[:, 0], A[:, 2] - A[:, 1])
+        n /= _norm(n)[:, None]
+        h = np.sum((B - A[:, :1]) * n[:, None], axis=2)             # (n, 4)
+        gap = np.maximum(gap, np.maximum(h.min(axis=1), -h.max(axis=1)))
+    return gap
 
 
 def _norm(v: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ of this process (``time.process_time``), so other jobs on a shared machine do no
 them. Results are printed and written as Markdown.
 
 Usage: ``python studies/bench_collisions.py [--sizes 20,100] [--omega 2.0]
-[--amplitude 0.01] [--out studies/results/bench_collisions.md]``;
+[--amplitude 0.001] [--out studies/results/bench_collisions.md]``;
 ``--smoke``: 4 x 4 panels, output to a temporary folder.
 """
 
@@ -79,7 +79,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="20,100")
     ap.add_argument("--omega", type=float, default=2.0)
-    ap.add_argument("--amplitude", type=float, default=0.01, help="perturbation / pi")
+    ap.add_argument("--amplitude", type=float, default=0.001, help="perturbation / pi")
     ap.add_argument("--out", type=Path, default=ROOT / "studies/results/bench_collisions.md")
     ap.add_argument("--smoke", action="store_true")
     args = ap.parse_args()
