@@ -372,9 +372,11 @@ def _coarse_rows(geo: _Geometry, near: list[np.ndarray], Y: np.ndarray, C: np.nd
     spin = _norm(Y[1:, geo.corners] - Y[:-1, geo.corners] - dC[:, :, None]).max(axis=2)
     out = []
     for k in range(len(near) - 1):
-        code = np.unique(np.concatenate([near[k][:, 0] * P + near[k][:, 1],
-                                         near[k + 1][:, 0] * P + near[k + 1][:, 1]]))
-        p, q = np.divmod(code, P)
+        code = np.sort(np.concatenate([near[k][:, 0] * P + near[k][:, 1],
+                                       near[k + 1][:, 0] * P + near[k + 1][:, 1]]))
+        first = np.ones(len(code), dtype=bool)
+        first[1:] = code[1:] != code[:-1]
+        p, q = np.divmod(code[first], P)
         radii = geo.radius[p] + geo.radius[q]
         m = SAFETY * (_norm(dC[k, p] - dC[k, q]) + spin[k, p] + spin[k, q])
         lb = _norm(C[k, p] - C[k, q]) + _norm(C[k + 1, p] - C[k + 1, q]) - 2 * radii
@@ -401,3 +403,15 @@ def _split(geo: _Geometry, rows: np.ndarray, omegas: list, S: np.ndarray,
     left = np.stack([rows[:, 0], mid, rows[:, 2], rows[:, 3]], axis=1)
     right = np.stack([mid, rows[:, 1], rows[:, 2], rows[:, 3]], axis=1)
     return np.concatenate([left, right]), S
+
+
+def near_pairs(pattern: Pattern, Y: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of panels that share no vertex within ``reach`` in one state, for
+    :mod:`rffqm_nlp.clearance`: the pairs (n, 2) (0-based panel indices p = (i-1) M +
+    (j-1), p < q) whose bounding spheres in the folded vertices Y ((N+1, M+1, 3)) come
+    within ``reach`` (the broad phase), and their exact distances (n,)."""
+    geo = _Geometry(pattern)
+    S = np.asarray(Y, dtype=float).reshape(1, -1, 3)
+    pq = _near_pairs(geo, geo.centres(S)[0], float(reach))
+    s = np.zeros(len(pq), dtype=np.int64)
+    return pq, panel_distance(geo, S, s, pq[:, 0], pq[:, 1])
