@@ -158,7 +158,10 @@ def _target_for_render(result: "DesignResult", target=None):
             warn(f"cannot rebuild the target surface ({one_line(exc)}); drawing the target "
                  "lattice points instead")
             return _pattern_frame(result.target_points.reshape(-1, 3), result)
-    mesh = target.mesh(TARGET_MESH, TARGET_MESH)
+    if isinstance(target, surfaces.Mesh) and target.mesh is not None:
+        mesh = target.mesh  # the shape itself, not its spline
+    else:
+        mesh = surfaces.Surface.mesh(target, TARGET_MESH, TARGET_MESH)
     return trimesh.Trimesh(vertices=_pattern_frame(mesh.vertices, result), faces=mesh.faces,
                            process=False)
 
@@ -188,7 +191,10 @@ def _check_frames(frames: int) -> None:
 @app.command(cls=_PanelsCommand)
 def design(
     target: Path = typer.Argument(..., help="Design file (TOML) with [target], [design] "
-                                  "and [solve] tables, e.g. targets/sphere_cap.toml.",
+                                  "and [solve] tables, e.g. targets/sphere_cap.toml; or a "
+                                  "mesh or point cloud file (OBJ, STL, PLY, OFF, GLB, XYZ: "
+                                  "any format trimesh reads) designed with the default "
+                                  "options.",
                                   show_default=False),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder (must be new or empty "
                              "unless --force, which replaces it whole).", show_default=False),
@@ -201,16 +207,19 @@ def design(
     panels: Optional[str] = typer.Option(None, "--panels", metavar="2N 2M",
                                          help="Pattern size, two even numbers >= 4: "
                                          "'--panels 20 20' or '--panels 20,20' (overrides "
-                                         "the file's panels)."),
+                                         "the file's panels; 20 20 for a mesh file)."),
 ) -> None:
     """Design a crease pattern that folds into the target surface of TARGET.
+
+    TARGET is a design file, or a mesh or point cloud (one patch of disk topology,
+    rq.surfaces.Mesh, docs/meshes.md) designed with the default design and solve options.
 
     Solves the inverse problem with the file's [solve] options (Levenberg-Marquardt on the
     marching manifold by default, or IPOPT; live progress: iteration, objective, constraint
     violation, elapsed time), prints the fit, and writes into OUT: result.json (the saved
     result), pattern.fold (24 states from flat to the designed omega), crease.svg/.pdf/.dxf,
-    folded.obj/.glb, render.png and folding.gif (when off-screen rendering works) and
-    convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
+    folded.obj/.glb, render.png (the target mesh coloured by its distance to the design)
+    and folding.gif (when off-screen rendering works) and convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
     (x_a^11 = 0); result.json also holds the folded state aligned onto the target.
     """
     from .design import load_design

@@ -24,7 +24,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-from . import numpy_model, reduced, shape, surfaces, transcription
+from . import meshes, numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
@@ -600,7 +600,14 @@ def from_config(config: dict[str, Any]) -> tuple[DesignProblem, SolveOptions]:
 
 def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
     """The problem and the options of a design file (TOML with the tables [target],
-    [design] and [solve]), e.g. ``problem, options = load_design("targets/sphere_cap.toml")``."""
+    [design] and [solve]), e.g. ``problem, options = load_design("targets/sphere_cap.toml")``.
+
+    A file whose suffix names a format trimesh reads (:func:`rffqm_nlp.meshes.is_mesh_file`:
+    OBJ, STL, PLY, OFF, GLB, XYZ, ...) is a mesh or point cloud: its
+    :class:`~rffqm_nlp.meshes.Mesh` (by its absolute path) with the default design and
+    solve options."""
+    if meshes.is_mesh_file(path):
+        return DesignProblem(surfaces.Mesh(Path(path).absolute())), SolveOptions()
     return from_config(read_toml(path, "design file"))
 
 

@@ -229,6 +229,12 @@ def shape_distances(target: Surface, points: Any) -> tuple[float, float]:
 # -- loading -------------------------------------------------------------------------------
 
 
+def is_mesh_file(path: str | Path) -> bool:
+    """Whether ``path``'s suffix names a format trimesh reads (OBJ, STL, PLY, OFF, GLB,
+    XYZ, ...), case-insensitively."""
+    return Path(path).suffix.lower().lstrip(".") in trimesh.available_formats()
+
+
 def _load(source: Any, what: str) -> tuple[trimesh.Trimesh | None, np.ndarray | None]:
     """(cleaned mesh, None) or (None, cloud points (n, 3)) from any accepted source."""
     if isinstance(source, (str, Path)):
@@ -260,6 +266,8 @@ def _load(source: Any, what: str) -> tuple[trimesh.Trimesh | None, np.ndarray | 
 
 def _read(path: Path) -> Any:
     """trimesh's reading of a file; every failure becomes one SurfaceError line."""
+    if path.is_dir():
+        raise SurfaceError(f"cannot read {path} as a mesh: it is a folder; give a mesh file")
     if not path.is_file():
         raise SurfaceError(f"cannot read {path} as a mesh: no such file")
     try:

@@ -139,12 +139,24 @@ def _polydata(pv, Y: np.ndarray, N: int, M: int):
     return pv.PolyData(Y.reshape(-1, 3), cells)
 
 
+#: Scalar bar title of render.png with a target mesh.
+TARGET_DISTANCE = "target: distance to the design"
+
+
+def _add_target_mesh(pv, p, mesh, target) -> None:
+    """Draw the target mesh on ``p`` coloured by each of its vertices' distance to the
+    folded ``mesh`` (the design), and the design's creases as black lines over it."""
+    surf = pv.wrap(target).copy()
+    distance = surf.compute_implicit_distance(mesh.triangulate())["implicit_distance"]
+    surf[TARGET_DISTANCE] = np.abs(distance)
+    p.add_mesh(surf, scalars=TARGET_DISTANCE, cmap="viridis",
+               scalar_bar_args={"title": TARGET_DISTANCE, "color": "black"})
+    p.add_mesh(mesh, style="wireframe", color="black", line_width=1)
+
+
 def _add_target(pv, p, mesh, target) -> np.ndarray:
-    """Draw ``target`` translucent on ``p``; return every mesh vertex's distance to it."""
-    if hasattr(target, "vertices") and hasattr(target, "faces"):
-        surf = pv.wrap(target)
-        p.add_mesh(surf, color="lightgray", opacity=0.35)
-        return np.abs(mesh.compute_implicit_distance(surf)["implicit_distance"])
+    """Draw the target points ``target`` (n, 3) translucent on ``p``; return every mesh
+    vertex's distance to the nearest of them."""
     pts = np.asarray(target, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
         raise InputError(f"target must be a trimesh.Trimesh or (n, 3) points, got shape "
@@ -165,9 +177,10 @@ def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
                size: tuple[int, int] = (800, 600)) -> Path:
     """Render the folded state at ``omega`` to a PNG of ``size`` (width, height) pixels.
 
-    With a ``target`` (a trimesh.Trimesh or (n, 3) points in the frame of
-    :func:`marching.fold`) the origami is coloured by its distance to the target, which is
-    drawn translucent; otherwise by height z.
+    With a ``target`` mesh (a trimesh.Trimesh in the frame of :func:`marching.fold`) the
+    target is drawn coloured by its distance to the design, with the design's creases as
+    lines; with target points ((n, 3), same frame) the origami is coloured by its distance
+    to them, drawn translucent; otherwise the origami is coloured by height z.
     """
     pv = _pyvista()
     import imageio.v3 as iio
@@ -175,14 +188,14 @@ def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
     mesh = _polydata(pv, fold(pat, float(check_omega(omega))), pat.N, pat.M)
     p = _plotter(pv, size)
     try:
-        if target is None:
-            title = "z"
-            mesh[title] = mesh.points[:, 2]
+        if hasattr(target, "vertices") and hasattr(target, "faces"):
+            _add_target_mesh(pv, p, mesh, target)
         else:
-            title = "distance to target"
-            mesh[title] = _add_target(pv, p, mesh, target)
-        p.add_mesh(mesh, scalars=title, cmap="viridis", show_edges=True, edge_color="black",
-                   scalar_bar_args={"title": title, "color": "black"})
+            title = "z" if target is None else "distance to target"
+            mesh[title] = (mesh.points[:, 2] if target is None
+                           else _add_target(pv, p, mesh, target))
+            p.add_mesh(mesh, scalars=title, cmap="viridis", show_edges=True,
+                       edge_color="black", scalar_bar_args={"title": title, "color": "black"})
         p.view_isometric()
         p.reset_camera()
         img = p.screenshot(return_img=True)
