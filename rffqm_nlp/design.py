@@ -24,7 +24,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-from . import meshes, numpy_model, reduced, shape, surfaces, transcription
+from . import numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
@@ -606,7 +606,9 @@ def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
     OBJ, STL, PLY, OFF, GLB, XYZ, ...) is a mesh or point cloud: its
     :class:`~rffqm_nlp.meshes.Mesh` (by its absolute path) with the default design and
     solve options."""
-    if meshes.is_mesh_file(path):
+    from .meshes import is_mesh_file  # here: meshes imports surfaces, which imports Mesh
+
+    if is_mesh_file(path):
         return DesignProblem(surfaces.Mesh(Path(path).absolute())), SolveOptions()
     return from_config(read_toml(path, "design file"))
 
