@@ -26,6 +26,7 @@ import numpy as np
 
 from . import numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
+from .curvature import curvature_maps
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
 from .files import read_toml
@@ -59,6 +60,9 @@ GAUSS_NEWTON_ITERATIONS = 30
 #: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
 #: does it after stop_rms is reached).
 HANDOVER_STOP_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
+#: Samples per direction of the target kept in a result whose target config cannot rebuild
+#: it (DesignResult.target_grid), for its pictures.
+TARGET_GRID = 41
 
 
 @dataclass(frozen=True)
@@ -535,9 +539,15 @@ class DesignProblem:
                   min_sector_angle=float(pattern.sector_angles.min()))
         _require_finite({"the folded state": folded, "the fit": list(fit.to_dict().values())},
                         stats, x)
+        problem = self.config(options)
+        grid = (None if surfaces.rebuildable(problem["target"])
+                else self.target.sample(TARGET_GRID, TARGET_GRID))
         return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
                             target_points=start.target_points, rotation=R, translation=t,
-                            fit=fit, stats=stats, problem=self.config(options), x=x)
+                            fit=fit, stats=stats, problem=problem, x=x,
+                            curvature=curvature_maps(folded[::2, ::2], start.target_points,
+                                                     self.target),
+                            target_grid=grid)
 
     def _check_constraints(self, pattern, stats: SolveStats, x: np.ndarray) -> None:
         tol = 1e-6
@@ -557,11 +567,13 @@ class DesignProblem:
 
     # ------------------------------------------------------------------ configuration
     def to_config(self) -> dict[str, Any]:
-        """The problem as TOML-ready tables: {"target": ..., "design": ...}."""
+        """The problem as TOML-ready tables: {"target": ..., "design": ...}. A target that no
+        table can name (a lambda, a closure, a Mesh made from arrays) is recorded as not
+        rebuildable (:func:`rffqm_nlp.surfaces.config_of`)."""
         design = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "target"}
         design.update(weights=dict(self.weights), panels=list(self.panels),
                       omega_bounds=list(self.omega_bounds), fix=list(self.fix))
-        return {"target": self.target.to_config(), "design": design}
+        return {"target": surfaces.config_of(self.target), "design": design}
 
     def config(self, options: SolveOptions) -> dict[str, Any]:
         """{"target", "design", "solve"}: this problem solved with ``options``."""

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import numpy_model
 from .boundary import BoundaryData
+from .curvature import Curvature
 from .errors import InputError, RffqmError
 from .files import jsonable, write_json
 from .pattern import Pattern
@@ -138,7 +139,14 @@ class DesignResult:
     * ``fit``: a :class:`Fit`; ``stats``: a :class:`SolveStats`;
     * ``problem``: {"target", "design", "solve"}: the problem and the options it was solved
       with, as TOML-ready tables;
-    * ``x``: the solver's final design vector (for warm starts).
+    * ``x``: the solver's final design vector (for warm starts);
+    * ``curvature``: the :class:`~rffqm_nlp.curvature.Curvature` maps of the design and
+      the target, each (N/2 - 1, M/2 - 1) (None when not computed);
+    * ``target_grid``: (n, m, 3) samples of the target surface, uniform in its parameters,
+      kept when ``problem["target"]`` cannot rebuild it (a lambda or closure: see
+      :func:`rffqm_nlp.surfaces.config_of`), else None.
+
+    In a notebook a result shows its interactive view (:mod:`rffqm_nlp.view`).
     """
 
     boundary: BoundaryData
@@ -152,14 +160,33 @@ class DesignResult:
     stats: SolveStats
     problem: dict[str, Any] = field(default_factory=dict)
     x: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    curvature: Curvature | None = None
+    target_grid: np.ndarray | None = None
 
     @property
     def coarse(self) -> np.ndarray:
         """The coarse-grained folded lattice r(i, j) = y^{(2i)(2j)}, aligned to the target."""
         return self.folded[::2, ::2]
 
+    def _repr_html_(self) -> str:
+        from .view import repr_html
+
+        return repr_html(self)
+
+    def view(self, frames: int = 24):
+        """The interactive view as a plotly Figure (:func:`rffqm_nlp.view.figure`)."""
+        from .view import figure
+
+        return figure(self, frames)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary of the whole result."""
+        """JSON-ready dictionary of the whole result (``curvature`` and ``target_grid`` left
+        out when None)."""
+        optional = {}
+        if self.curvature is not None:
+            optional["curvature"] = self.curvature.to_dict()
+        if self.target_grid is not None:
+            optional["target_grid"] = np.asarray(self.target_grid).tolist()
         return {
             "format": FORMAT, "version": VERSION,
             "boundary": self.boundary.to_dict(), "omega": self.omega,
@@ -167,7 +194,7 @@ class DesignResult:
             "target_points": self.target_points.tolist(), "rotation": self.rotation.tolist(),
             "translation": self.translation.tolist(), "fit": self.fit.to_dict(),
             "stats": self.stats.to_dict(), "problem": jsonable(self.problem),
-            "x": np.asarray(self.x).tolist(),
+            "x": np.asarray(self.x).tolist(), **optional,
         }
 
     @classmethod
@@ -263,7 +290,34 @@ def _checked(d: dict[str, Any], source: str) -> DesignResult:
         target_points=arrays["target_points"], rotation=arrays["rotation"],
         translation=arrays["translation"], fit=Fit.from_dict(_required(d, "fit", source)),
         stats=SolveStats.from_dict(_required(d, "stats", source)),
-        problem=dict(_required(d, "problem", source)), x=arrays["x"])
+        problem=dict(_required(d, "problem", source)), x=arrays["x"],
+        curvature=_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
+        target_grid=_target_grid(d, source))
+
+
+def _curvature(d: dict[str, Any], source: str, shape: tuple[int, int]) -> Curvature | None:
+    """The stored curvature maps (None when the file has none), each finite and ``shape``."""
+    if "curvature" not in d:
+        return None
+    maps = {}
+    for f in fields(Curvature):
+        name = f"curvature.{f.name}"
+        maps[f.name] = _finite(d["curvature"], f.name, source, name)
+        if maps[f.name].shape != shape:
+            raise InputError(f"{source}: {name} has shape {maps[f.name].shape}, expected "
+                             f"{shape} (the interior of the coarse lattice)")
+    return Curvature(**maps)
+
+
+def _target_grid(d: dict[str, Any], source: str) -> np.ndarray | None:
+    """The stored target samples (None when the file has none): finite, (n, m, 3), n, m >= 2."""
+    if "target_grid" not in d:
+        return None
+    grid = _finite(d, "target_grid", source)
+    if grid.ndim != 3 or grid.shape[2] != 3 or min(grid.shape[:2]) < 2:
+        raise InputError(f"{source}: target_grid has shape {grid.shape}, expected (n, m, 3) "
+                         "with n, m >= 2")
+    return grid
 
 
 def _required(d: Any, key: str, source: str) -> Any:
@@ -275,8 +329,9 @@ def _required(d: Any, key: str, source: str) -> Any:
 def _finite(d: Any, key: str, source: str, name: str | None = None) -> np.ndarray:
     """d[key] as a float array: a rectangular array of finite numbers, else InputError."""
     name = name or key
+    value = _required(d, key, source)
     try:
-        arr = np.asarray(_required(d, key, source), dtype=float)
+        arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise InputError(f"{source}: {name} must be a rectangular array of numbers (a cut "
                          "or ragged array?)") from None

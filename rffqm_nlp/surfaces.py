@@ -687,6 +687,11 @@ def from_config(table: Mapping[str, Any]) -> Surface:
     ``domain = [[u0, u1], [v0, v1]]``, or ``python = "package.module:function"`` plus a
     required ``domain``."""
     table = dict(table)
+    if not rebuildable(table):
+        raise SurfaceError(
+            f"[target] cannot be rebuilt: the target of this result was {table.get('made_from')} "
+            "and no config names it; rebuild the problem by passing the surface: "
+            "DesignProblem(target=<your surface>, **result.problem['design'])")
     if "python" in table:
         extra = sorted(set(table) - {"python", "domain"})
         if extra:
@@ -702,6 +707,30 @@ def from_config(table: Mapping[str, Any]) -> Surface:
                            f"{', '.join(_BUILTINS)}) or python = \"module:function\"")
     name = table.pop("name")
     return get(name, table.pop("domain", None), **table)
+
+
+def config_of(surface: Surface) -> dict:
+    """The ``[target]`` table of ``surface`` (:meth:`Surface.to_config`), or, for a surface
+    that no table can name (a lambda, a closure, a :class:`Mesh` made from arrays), the
+    record ``{"name", "domain", "rebuildable": False, "made_from"}``, which
+    :func:`from_config` refuses with a one-line reason."""
+    try:
+        return surface.to_config()
+    except SurfaceError:
+        pass
+    if isinstance(surface, Custom):
+        fn = surface._fn
+        made_from = (f"the Python callable {getattr(fn, '__module__', '?')}."
+                     f"{getattr(fn, '__qualname__', type(fn).__name__)}")
+    else:
+        made_from = f"a {type(surface).__name__} made in Python, not from a file"
+    return {"name": surface.name, "domain": _domain_list(surface.domain),
+            "rebuildable": False, "made_from": made_from}
+
+
+def rebuildable(table: Mapping[str, Any]) -> bool:
+    """Whether a ``[target]`` table names its surface (not a record of :func:`config_of`)."""
+    return "rebuildable" not in table
 
 
 def load(path: str | Path) -> Surface:

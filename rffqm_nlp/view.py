@@ -11,7 +11,9 @@ The page shows, in the target's frame (every state moved by the design's rigid m
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
   designed omega (:func:`rffqm_nlp.foldfile.edge_assignments`);
-* the target surface, hidden until its button is pressed;
+* the target surface, hidden until its button is pressed: the target lattice, or the finer
+  ``result.target_grid`` when the result keeps one (a target that its config cannot
+  rebuild);
 * a slider through the folding motion from flat (omega = 0) to folded flat (omega = +-pi,
   the sign of the designed omega), one step labelled "designed" at the designed omega. Its
   steps restyle x, y, z (and the distances) of the mesh and crease traces; the triangle
@@ -209,6 +211,7 @@ def spec(result: DesignResult, frames: int = 24) -> dict:
     pat = result.pattern
     Y = states(result, omegas)
     T = np.asarray(result.target_points, dtype=float)
+    S = T if result.target_grid is None else np.asarray(result.target_grid, dtype=float)
     decimals = _decimals(Y)
     paths = crease_paths(pat, omega)
     dist = distances(Y, T).reshape(len(omegas), -1)
@@ -221,10 +224,10 @@ def spec(result: DesignResult, frames: int = 24) -> dict:
                       "label": DESIGNED if n == at else f"{w:.2f}", "value": f"{w:.17g}"})
     first = steps[at]["args"][0]
     data = [_mesh(first, pat, first["intensity"][0], cmax), *_creases(first),
-            _target(T, decimals)]
+            _target(S, decimals)]
     layout = {
         "title": {"text": f"designed state: omega = {omega:.4f}", "x": 0.5},
-        "scene": _scene(Y, T, Y[at]), "margin": {"l": 0, "r": 0, "t": 40, "b": 0},
+        "scene": _scene(Y, S, Y[at]), "margin": {"l": 0, "r": 0, "t": 40, "b": 0},
         "legend": {"x": 0.01, "y": 0.9},
         "sliders": [{"active": at, "steps": steps, "pad": {"t": 10, "b": 10},
                      "currentvalue": {"prefix": "omega: "}}],

@@ -88,6 +88,42 @@ def plot_convergence(history: Mapping[str, Sequence[float]], path: str | os.Path
     return Path(path)
 
 
+def plot_curvature(curvature, path: str | os.PathLike) -> Path:
+    """The curvature maps of a :class:`~rffqm_nlp.curvature.Curvature` to ``path``: a 2 x 2
+    figure, design K and target K above, design H and target H below, one colour scale per
+    row (shared by design and target; the H scale symmetric about 0 when H changes sign),
+    each (N-1, M-1) map drawn at the interior lattice points i = 1..N-1 (down) and
+    j = 1..M-1 (across)."""
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
+
+    rows = (("K", "Gaussian curvature K", "viridis"), ("H", "mean curvature H", "coolwarm"))
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    axes = fig.subplots(2, 2)
+    for (kind, label, cmap), row in zip(rows, axes):
+        maps = [np.asarray(getattr(curvature, f"{who}_{kind}"), dtype=float)
+                for who in ("design", "target")]
+        lo = min(float(m.min()) for m in maps)
+        hi = max(float(m.max()) for m in maps)
+        if kind == "H" and lo < 0 < hi:
+            lo, hi = -max(-lo, hi), max(-lo, hi)
+        if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1e-300):
+            lo, hi = lo - max(abs(lo), 1.0) * 0.05, hi + max(abs(hi), 1.0) * 0.05
+        for ax, m, who in zip(row, maps, ("design (folded coarse lattice)", "target lattice")):
+            n, k = m.shape  # lattice points 1..n along i, 1..k along j
+            image = ax.imshow(m, cmap=cmap, vmin=lo, vmax=hi,
+                              extent=(0.5, k + 0.5, n + 0.5, 0.5))
+            ax.set_title(f"{label}: {who}", fontsize=10)
+            ax.set_xlabel("j")
+            ax.set_ylabel("i")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        fig.colorbar(image, ax=row.tolist(), label=kind)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, metadata=_no_date(Path(path).suffix))
+    return Path(path)
+
+
 def _no_date(suffix: str) -> dict | None:
     """savefig metadata that keeps vector output free of timestamps."""
     return {".svg": {"Date": None}, ".pdf": {"CreationDate": None}}.get(suffix.lower())

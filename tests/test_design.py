@@ -494,3 +494,88 @@ def test_solve_options_come_from_the_solve_table_and_overrides(tmp_path):
     assert res.stats.solver == "ipopt" and res.problem["solve"]["stop_rms"] == 0.05
     with pytest.raises(rq.InputError, match="solvr"):
         problem.solve(options, solvr="ipopt")
+
+
+def _closure_cap(radius: float):
+    """A sphere cap of ``radius`` through the origin as a closure (not importable by name)."""
+    def cap(u, v):
+        m = surfaces.mathlib(u, v)
+        return u, v, m.sqrt(radius ** 2 - u * u - v * v) - radius
+    return cap
+
+
+CALLABLE_TARGETS = {
+    "lambda": (lambda u, v: (u, v, 0.15 * u * u - 0.1 * v * v), ((-1.0, 1.0), (-1.0, 1.0)),
+               "<lambda>"),
+    "closure": (_closure_cap(3.0), ((-0.8, 0.8), (-0.8, 0.8)), "_closure_cap.<locals>.cap"),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(CALLABLE_TARGETS))
+def callable_solved(request, tmp_path_factory):
+    fn, domain, name = CALLABLE_TARGETS[request.param]
+    surface = surfaces.Custom(fn, domain)
+    problem = DesignProblem(surface, panels=(8, 8))
+    result = problem.solve(stop_rms=0.02)
+    folder = result.save(tmp_path_factory.mktemp(request.param)).parent
+    return surface, problem, result, name, folder
+
+
+def test_a_lambda_or_closure_target_solves_saves_and_reloads(callable_solved):
+    surface, problem, result, name, folder = callable_solved
+    assert result.stats.success and result.fit.rms < 0.02
+    target = result.problem["target"]
+    assert target["rebuildable"] is False and name in target["made_from"]
+    assert target["domain"] == [list(d) for d in surface.domain]
+    np.testing.assert_array_equal(result.target_grid,
+                                  surface.sample(design.TARGET_GRID, design.TARGET_GRID))
+    back = DesignResult.load(folder)
+    assert back.problem == result.problem and back.fit == result.fit
+    np.testing.assert_array_equal(back.target_grid, result.target_grid)
+    np.testing.assert_array_equal(back.curvature.design_H, result.curvature.design_H)
+    # the problem comes back when the surface is passed again
+    again = DesignProblem(target=surface, **back.problem["design"])
+    assert again == replace(problem, target=surface)
+
+
+def test_rebuilding_a_callable_target_is_refused_in_one_line(callable_solved, tmp_path):
+    _, _, result, name, folder = callable_solved
+    problem = DesignResult.load(folder).problem
+    attempts = [lambda: DesignProblem.from_config(problem),
+                lambda: design.from_config(problem),
+                lambda: surfaces.from_config(problem["target"])]
+    toml = tmp_path / "again.toml"
+    domain = problem["target"]["domain"]
+    toml.write_text(f'[target]\nname = "custom"\nrebuildable = false\ndomain = {domain}\n'
+                    f'made_from = "{problem["target"]["made_from"]}"\n')
+    attempts.append(lambda: rq.load_design(toml))
+    for attempt in attempts:
+        with pytest.raises(rq.InputError) as info:
+            attempt()
+        message = str(info.value)
+        assert "\n" not in message and "cannot be rebuilt" in message and name in message
+        assert "DesignProblem(target=" in message
+
+
+def test_render_and_view_draw_the_kept_target(callable_solved):
+    from rffqm_nlp import cli, view
+
+    _, _, result, _, folder = callable_solved
+    back = DesignResult.load(folder)
+    mesh = cli._target_for_render(back)
+    n = design.TARGET_GRID
+    assert mesh.vertices.shape == (n * n, 3) and len(mesh.faces) == 2 * (n - 1) ** 2
+    # in the pattern frame: moved back by the alignment, the grid is the kept target
+    np.testing.assert_allclose(mesh.vertices @ back.rotation.T + back.translation,
+                               back.target_grid.reshape(-1, 3), atol=1e-9)
+    drawn = view.spec(back, frames=3)["data"][4]
+    assert np.array(drawn["x"]).shape == (n, n)
+
+
+def test_a_mesh_made_from_arrays_is_recorded_as_not_rebuildable():
+    mesh = rq.surfaces.Mesh(rq.surfaces.get("plane").mesh(9, 9))
+    config = DesignProblem(mesh, panels=(4, 4)).to_config()["target"]
+    assert config["rebuildable"] is False and "Mesh" in config["made_from"]
+    with pytest.raises(rq.InputError, match="cannot be rebuilt: the target of this result "
+                                            "was a Mesh made in Python"):
+        surfaces.from_config(config)

@@ -141,3 +141,48 @@ def test_cli_refuses_a_broken_result_with_exit_2_and_one_line(result, tmp_path):
     assert res.exit_code == 2, res.output
     errors = [line for line in res.output.splitlines() if line.strip()]
     assert len(errors) == 1 and "pattern.lv holds NaN or inf" in errors[0], res.output
+
+
+def test_curvature_maps_round_trip(result, tmp_path):
+    maps = result.curvature
+    assert maps is not None and maps.design_K.shape == (1, 2)  # interior of the 3 x 4 lattice
+    back = DesignResult.load(result.save(tmp_path / "run"))
+    for name, value in vars(maps).items():
+        np.testing.assert_array_equal(getattr(back.curvature, name), value)
+    assert back.target_grid is None  # a built-in target: the config rebuilds it
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda c: c.update(target_H=[[0.1]]),
+     r"curvature\.target_H has shape \(1, 1\), expected \(1, 2\)"),
+    (lambda c: c["design_K"][0].__setitem__(1, float("nan")), r"curvature\.design_K holds NaN"),
+    (lambda c: c.pop("surface_H"), "'surface_H' is missing"),
+])
+def test_broken_curvature_maps_are_refused(result, tmp_path, change, message):
+    data = result.to_dict()
+    change(data["curvature"])
+    with pytest.raises(rq.InputError, match=message):
+        DesignResult.load(saved(tmp_path, data))
+
+
+def test_a_result_without_curvature_maps_loads(result, tmp_path):
+    data = result.to_dict()
+    del data["curvature"]
+    assert DesignResult.load(saved(tmp_path, data)).curvature is None
+
+
+def test_a_broken_target_grid_is_refused(result, tmp_path):
+    data = result.to_dict()
+    data["target_grid"] = [[[0.0, 0.0, 0.0]]]
+    with pytest.raises(rq.InputError, match=r"target_grid has shape \(1, 1, 3\)"):
+        DesignResult.load(saved(tmp_path, data))
+
+
+def test_a_result_displays_its_view_in_a_notebook(result):
+    html = result._repr_html_()
+    assert html.startswith('<div id="rffqm-view-') and 'class="rffqm-view"' in html
+    assert "Plotly.newPlot(div" in html
+    figure = result.view(frames=4)
+    assert [trace.type for trace in figure.data] == ["mesh3d", "scatter3d", "scatter3d",
+                                                     "scatter3d", "surface"]
+    assert len(figure.layout.sliders[0].steps) == 5

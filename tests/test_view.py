@@ -6,6 +6,7 @@ import base64
 import gzip
 import json
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -184,3 +185,20 @@ def test_repr_html(result):
 def test_page_size_at_40_by_40(tmp_path):
     path = view.write_html(miura_result(40), tmp_path / "view.html")
     assert path.stat().st_size < 5_000_000
+
+
+def test_target_trace_uses_the_kept_target_grid(result):
+    """A result that keeps a target grid (its target cannot be rebuilt) draws that grid as
+    the target surface, and frames the scene around it."""
+    T = np.asarray(result.target_points)
+    u = np.linspace(0.0, 1.0, 13)[:, None, None]
+    v = np.linspace(0.0, 1.0, 11)[None, :, None]
+    grid = T[0, 0] + u * (T[-1, 0] - T[0, 0]) + v * (T[0, -1] - T[0, 0]) + [0.0, 0.0, 3.0]
+    kept = replace(result, target_grid=grid)
+    target = view.spec(kept, frames=4)["data"][4]
+    assert np.array(target["z"]).shape == (13, 11)
+    np.testing.assert_allclose(np.array(target["z"]), grid[..., 2], atol=1e-3)
+    z_range = view.spec(kept, frames=4)["layout"]["scene"]["zaxis"]["range"]
+    assert z_range[1] >= grid[..., 2].max()
+    plain = view.spec(result, frames=4)["data"][4]
+    assert np.array(plain["z"]).shape == T.shape[:2]
