@@ -2,9 +2,9 @@
 
 Commands: ``design`` (inverse design of a TOML target, with live solver progress), ``sweep``
 (a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
-serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export`` and ``render`` (of a
-saved design result), ``targets`` (the built-in surfaces) and ``march`` (forward marching of
-a perturbed Miura-ori).
+serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export``, ``render`` and
+``view`` (of a saved design result), ``targets`` (the built-in surfaces) and ``march``
+(forward marching of a perturbed Miura-ori).
 
 Every user error (missing or bad file, unknown target, a failed marching check, an
 infeasible design, a solver failure) ends with a one-line red reason and exit status 2,
@@ -49,6 +49,9 @@ console = Console(stderr=True)
 FRAMES = 24
 #: Resolution (per direction) of the target mesh drawn in render.png.
 TARGET_MESH = 60
+#: The interactive view (rffqm_nlp.view) and the curvature maps that ``design`` writes.
+VIEW_FILE = "view.html"
+CURVATURE_FILE = "curvature.png"
 #: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
 DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
 
@@ -145,12 +148,17 @@ def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
 
 
 def _target_for_render(result: "DesignResult", target=None):
-    """The target surface as a mesh in the pattern frame (or its lattice points when the
-    surface cannot be rebuilt from the saved configuration)."""
+    """The target surface as a mesh in the pattern frame: ``target``, the result's
+    ``target_grid`` (kept when no config rebuilds the target), or the surface rebuilt from
+    the saved configuration; its lattice points when that fails."""
     import trimesh
 
     from . import surfaces
 
+    if target is None and result.target_grid is not None:  # kept: no config rebuilds it
+        grid = result.target_grid
+        return trimesh.Trimesh(vertices=_pattern_frame(grid.reshape(-1, 3), result),
+                               faces=surfaces.grid_faces(*grid.shape[:2]), process=False)
     if target is None:
         try:
             target = surfaces.from_config(result.problem["target"])
@@ -218,9 +226,12 @@ def design(
     marching manifold by default, or IPOPT; live progress: iteration, objective, constraint
     violation, elapsed time), prints the fit, and writes into OUT: result.json (the saved
     result), pattern.fold (24 states from flat to the designed omega), crease.svg/.pdf/.dxf,
-    folded.obj/.glb, render.png (the target mesh coloured by its distance to the design)
-    and folding.gif (when off-screen rendering works) and convergence.png. Meshes, FOLD frames and pictures are in the pattern's frame
-    (x_a^11 = 0); result.json also holds the folded state aligned onto the target.
+    folded.obj/.glb, view.html (the interactive view, as ``rffqm view``), render.png (the
+    target mesh coloured by its distance to the design) and folding.gif (when off-screen
+    rendering works), convergence.png and curvature.png (the Gaussian and mean curvature
+    of the folded coarse lattice and of the target). Meshes, FOLD frames and pictures are
+    in the pattern's frame (x_a^11 = 0); result.json and view.html hold the folded state
+    aligned onto the target.
     """
     from .design import load_design
 
@@ -284,14 +295,17 @@ def _solve_logged(problem: "DesignProblem", options: "SolveOptions",
 
 def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem") -> None:
     """Every output file of ``design`` into ``folder``."""
-    from . import viz
+    from . import view, viz
 
     pat, omega = result.pattern, result.omega
     result.save(folder)
     options = _export_options(result)
     for fmt in DESIGN_FORMATS:
         EXPORTERS[fmt].write(folder / EXPORTERS[fmt].filename, pat, omega, **options)
+    view.write_html(result, folder / VIEW_FILE, frames=FRAMES)
     viz.plot_convergence(result.stats.history, folder / "convergence.png")
+    if result.curvature is not None:
+        viz.plot_curvature(result.curvature, folder / CURVATURE_FILE)
     ok, reason = viz.rendering_available()
     if ok:
         _render_files(folder, result, omega, FRAMES, target=problem.target)
@@ -483,6 +497,35 @@ def render(
                 _render_files(tmp, result, omega_end, frames)
     console.print(f"wrote {escape(str(folder / 'render.png'))} and "
                   f"{escape(str(folder / 'folding.gif'))}", highlight=False)
+
+
+# --------------------------------------------------------------------------- view
+@app.command("view")
+def view_cmd(
+    result_dir: Path = typer.Argument(..., help="Folder of a saved design (result.json).",
+                                      show_default=False),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="HTML file to write "
+                                       "(default: RESULT_DIR/view.html)."),
+    frames: int = typer.Option(FRAMES, help="Slider states from flat to folded flat (the "
+                               "designed state is added)."),
+) -> None:
+    """Write the interactive view of a saved design: one self-contained HTML page (plotly,
+    works offline) with the folded pattern coloured by its distance to the target, its
+    mountain and valley creases, a button for the target surface and a slider through the
+    folding motion from flat to folded flat, the designed state marked.
+    """
+    from . import view
+
+    with user_errors():
+        _check_frames(frames)
+        result = _load_result(result_dir)
+        path = out if out is not None else _result_folder(result_dir) / VIEW_FILE
+        if path.suffix.lower() not in (".html", ".htm"):
+            raise InputError(f"--out must name an .html file, got {path}")
+        if not path.parent.is_dir():
+            raise InputError(f"--out: no folder {path.parent} to write {path.name} into")
+        view.write_html(result, path, frames=frames)
+    console.print(f"wrote {escape(str(path))}", highlight=False)
 
 
 # --------------------------------------------------------------------------- targets

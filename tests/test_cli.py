@@ -37,7 +37,7 @@ panels = [8, 8]
 {solve}
 """
 DESIGN_FILES = {"result.json", "pattern.fold", "crease.svg", "crease.pdf", "crease.dxf",
-                "folded.obj", "folded.glb", "convergence.png"}
+                "folded.obj", "folded.glb", "convergence.png", "view.html", "curvature.png"}
 RENDER_FILES = {"render.png", "folding.gif"}
 N_VERTICES = 9 * 9
 
@@ -266,6 +266,46 @@ def test_render_without_rendering_fails_cleanly(designed, tmp_path, monkeypatch)
     assert not (tmp_path / "p").exists()
 
 
+# --------------------------------------------------------------------------- view
+def test_view_writes_a_small_self_contained_page(designed, tmp_path):
+    out = tmp_path / "view.html"
+    res = invoke("view", designed[0], "--out", out, "--frames", "6")
+    assert res.exit_code == 0, res.output
+    html = out.read_text()
+    assert html.startswith("<!DOCTYPE html>") and 'class="rffqm-view"' in html
+    assert "<script src" not in html and out.stat().st_size < 5_000_000
+    assert [p.name for p in tmp_path.iterdir()] == ["view.html"]
+    # the design wrote the same page (24 states) into its folder
+    written = (designed[0] / "view.html").stat().st_size
+    assert 0 < written < 5_000_000
+
+
+def test_view_defaults_to_the_result_folder(designed, tmp_path):
+    folder = tmp_path / "result"
+    folder.mkdir()
+    (folder / "result.json").write_bytes((designed[0] / "result.json").read_bytes())
+    res = invoke("view", folder / "result.json", "--frames", "3")
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in folder.iterdir()} == {"result.json", "view.html"}
+
+
+def test_view_bad_input_exits_2_in_one_line(designed, tmp_path):
+    for args, fragments in (
+            ([tmp_path / "none"], ["no design result"]),
+            ([designed[0], "--out", tmp_path / "view.png"], ["--out", ".html"]),
+            ([designed[0], "--out", tmp_path / "no" / "v.html"], ["--out", "no folder"]),
+            ([designed[0], "--frames", "1", "--out", tmp_path / "v.html"], ["--frames"])):
+        res = invoke("view", *args)
+        assert res.exit_code == 2, res.output
+        assert_user_error(res, *fragments)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_curvature_png_of_the_design(designed, result):
+    assert png_size(designed[0] / "curvature.png")[0] > 500
+    assert result.curvature.design_K.shape == (3, 3)
+
+
 def test_targets_lists_every_builtin():
     res = invoke("targets")
     assert res.exit_code == 0, res.output
@@ -275,7 +315,7 @@ def test_targets_lists_every_builtin():
 
 
 @pytest.mark.parametrize("command", [[], ["design"], ["fold"], ["export"], ["render"],
-                                     ["targets"], ["march"]])
+                                     ["view"], ["targets"], ["march"]])
 def test_help(command):
     res = invoke(*command, "--help")
     assert res.exit_code == 0 and "Usage" in res.output
