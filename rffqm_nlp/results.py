@@ -169,6 +169,7 @@ class DesignResult:
         return self.folded[::2, ::2]
 
     def _repr_html_(self) -> str:
+        """The interactive view in a notebook (:func:`rffqm_nlp.view.repr_html`)."""
         from .view import repr_html
 
         return repr_html(self)

@@ -691,7 +691,8 @@ def from_config(table: Mapping[str, Any]) -> Surface:
         raise SurfaceError(
             f"[target] cannot be rebuilt: the target of this result was {table.get('made_from')} "
             "and no config names it; rebuild the problem by passing the surface: "
-            "DesignProblem(target=<your surface>, **result.problem['design'])")
+            "DesignProblem(target=<your surface>, **result.problem['design']), or in a file "
+            "name a function with python = \"file.py:function\" and domain")
     if "python" in table:
         extra = sorted(set(table) - {"python", "domain"})
         if extra:

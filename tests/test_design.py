@@ -554,7 +554,7 @@ def test_rebuilding_a_callable_target_is_refused_in_one_line(callable_solved, tm
             attempt()
         message = str(info.value)
         assert "\n" not in message and "cannot be rebuilt" in message and name in message
-        assert "DesignProblem(target=" in message
+        assert "DesignProblem(target=" in message and 'python = "file.py:function"' in message
 
 
 def test_render_and_view_draw_the_kept_target(callable_solved):
