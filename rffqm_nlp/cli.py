@@ -52,6 +52,9 @@ TARGET_MESH = 60
 #: The interactive view (rffqm_nlp.view) and the curvature maps that ``design`` writes.
 VIEW_FILE = "view.html"
 CURVATURE_FILE = "curvature.png"
+#: Help of the --trust option of the commands that read a target file.
+TRUST_HELP = ("Run the code that the target file names (python = \"file.py:function\" or "
+              "\"package.module:function\"); only for files you trust.")
 #: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
 DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
 
@@ -147,10 +150,11 @@ def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
     return (np.asarray(points, dtype=float) - result.translation) @ result.rotation
 
 
-def _target_for_render(result: "DesignResult", target=None):
+def _target_for_render(result: "DesignResult", target=None, trust: bool = False):
     """The target surface as a mesh in the pattern frame: ``target``, the result's
     ``target_grid`` (kept when no config rebuilds the target), or the surface rebuilt from
-    the saved configuration; its lattice points when that fails."""
+    the saved configuration; its lattice points when that fails (the target names code and
+    ``trust`` is not given)."""
     import trimesh
 
     from . import surfaces
@@ -161,7 +165,7 @@ def _target_for_render(result: "DesignResult", target=None):
                                faces=surfaces.grid_faces(*grid.shape[:2]), process=False)
     if target is None:
         try:
-            target = surfaces.from_config(result.problem["target"])
+            target = surfaces.from_config(result.problem["target"], trust=trust)
         except (RffqmError, KeyError, TypeError) as exc:
             warn(f"cannot rebuild the target surface ({one_line(exc)}); drawing the target "
                  "lattice points instead")
@@ -182,11 +186,11 @@ def _export_options(result: "DesignResult") -> dict:
 
 
 def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames: int,
-                  target=None) -> None:
+                  target=None, trust: bool = False) -> None:
     from . import viz
 
     viz.render_png(folder / "render.png", result.pattern, result.omega,
-                   target=_target_for_render(result, target))
+                   target=_target_for_render(result, target, trust))
     viz.folding_gif(folder / "folding.gif", result.pattern, omega_end, frames=frames)
 
 
@@ -216,6 +220,7 @@ def design(
                                          help="Pattern size, two even numbers >= 4: "
                                          "'--panels 20 20' or '--panels 20,20' (overrides "
                                          "the file's panels; 20 20 for a mesh file)."),
+    trust: bool = typer.Option(False, "--trust", help=TRUST_HELP),
 ) -> None:
     """Design a crease pattern that folds into the target surface of TARGET.
 
@@ -233,14 +238,15 @@ def design(
     in the pattern's frame (x_a^11 = 0); result.json and view.html hold the folded state
     aligned onto the target.
     """
-    from .design import load_design
+    from .design import check_memory, load_design
 
     with user_errors():
-        problem, options = load_design(target)
+        problem, options = load_design(target, trust=trust)
         if panels is not None:
             problem = dataclasses.replace(problem, panels=_parse_panels(panels))
         if max_iter is not None:
             options = dataclasses.replace(options, max_iter=max_iter)
+        check_memory(problem, options)     # sizes this machine cannot hold: before any work
         check_out_dir(out, force)          # before the solve: never waste a long solve
         result = _solve(problem, options, quiet)
         with replace_folder(out) as tmp:
@@ -357,6 +363,7 @@ def sweep_cmd(
     workers: int = typer.Option(2, "--workers", min=1, help="Worker processes of the local "
                                 "cluster (one thread each)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    trust: bool = typer.Option(False, "--trust", help=TRUST_HELP),
 ) -> None:
     """Run a design study: every design of STUDY as one Dask task.
 
@@ -367,11 +374,12 @@ def sweep_cmd(
     reason; the command still succeeds. Re-running into OUT skips finished designs and
     recomputes broken or missing ones.
     """
-    from .sweeps import run
+    from .sweeps import Study, run
 
     with user_errors():
+        loaded = Study.load(study, trust=trust)
         check_out_dir(out, force=True)
-        frame = run(study, out, scheduler=scheduler, workers=workers, progress=not quiet,
+        frame = run(loaded, out, scheduler=scheduler, workers=workers, progress=not quiet,
                     console=console)
     Console().print(_sweep_summary(frame, out))
 
@@ -472,6 +480,9 @@ def render(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder (default: "
                                        "RESULT_DIR)."),
     frames: int = typer.Option(FRAMES, help="States in folding.gif."),
+    trust: bool = typer.Option(False, "--trust", help="Rebuild a target that names code "
+                               "(python = ...) by running that code; without it such a "
+                               "target is drawn as its lattice points."),
 ) -> None:
     """Render a saved design: render.png (the designed state with the target) and
     folding.gif (the whole motion, from flat to folded flat).
@@ -491,10 +502,10 @@ def render(
         check_out_dir(folder, force=True)
         omega_end = math.copysign(math.pi, result.omega)
         if folder.is_dir():
-            _render_files(folder, result, omega_end, frames)
+            _render_files(folder, result, omega_end, frames, trust=trust)
         else:
             with replace_folder(folder) as tmp:
-                _render_files(tmp, result, omega_end, frames)
+                _render_files(tmp, result, omega_end, frames, trust=trust)
     console.print(f"wrote {escape(str(folder / 'render.png'))} and "
                   f"{escape(str(folder / 'folding.gif'))}", highlight=False)
 

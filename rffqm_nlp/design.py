@@ -14,8 +14,8 @@ options: docs/solvers.md.
 
 from __future__ import annotations
 
-import difflib
-import math
+import os
+import re
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -29,7 +29,8 @@ from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .curvature import curvature_maps
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
-from .files import read_toml
+from .files import (Key, check_table, check_value, describe_value, key_name, read_toml,
+                    unknown_key)
 from .results import DesignResult, Fit, SolveStats
 
 PI = np.pi
@@ -60,6 +61,41 @@ GAUSS_NEWTON_ITERATIONS = 30
 #: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
 #: does it after stop_rms is reached).
 HANDOVER_STOP_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
+
+#: What each key of a design file's [design] table (and each DesignProblem field but the
+#: target) allows; checked by :func:`rffqm_nlp.files.check_table`.
+DESIGN_KEYS = {
+    "panels": Key("list", length=2, item=Key("whole", low=4, even=True), hint="(2N, 2M)"),
+    "layout": Key("choice", choices=LAYOUTS),
+    "alpha0": Key("number", low=0.0, high=PI / 2, low_open=True, high_open=True),
+    "omega0": Key("number", low=-PI, high=PI),
+    "min_angle": Key("number", low=0.0, high=PI / 4, high_open=True),
+    "mu_margin": Key("number", low=0.0, high=1.0, high_open=True),
+    "min_length": Key("number", low=0.0),
+    "omega_bounds": Key("list", length=2, item=Key("number", low=-PI, high=PI),
+                        hint="([low, high])"),
+    "fix": Key("list", item=Key("choice", choices=GROUPS)),
+    "weights": Key("table", spec={name: Key("number", low=0.0) for name in DEFAULT_WEIGHTS}),
+}
+#: What each key of a [solve] table (and each SolveOptions field) allows.
+SOLVE_KEYS = {
+    "solver": Key("choice", choices=SOLVERS),
+    "transcription": Key("choice", choices=TRANSCRIPTIONS),
+    "hessian": Key("choice", choices=HESSIANS),
+    "damping": Key("number", low=0.0),
+    "continuation": Key("list", least=1, item=Key("number", low=0.0, low_open=True)),
+    "max_iter": Key("whole", low=1),
+    "tol": Key("number", low=0.0, low_open=True),
+    "time_limit": Key("number", low=0.0, low_open=True, optional=True),
+    "stop_rms": Key("number", low=0.0, low_open=True, optional=True),
+    "barrier_init": Key("number", low=0.0, low_open=True, optional=True),
+    "ipopt_options": Key("table", item=Key(
+        "scalar", hint="(IPOPT's yes/no options take 'yes' or 'no')")),
+    "multistart": Key("whole", low=1),
+    "seed": Key("whole", low=0),
+}
+#: The tables of a design file as :func:`rffqm_nlp.files.check_table` checks them.
+FILE_KEYS = {name: Key("table") for name in TABLES}
 #: Samples per direction of the target kept in a result whose target config cannot rebuild
 #: it (DesignResult.target_grid), for its pictures.
 TARGET_GRID = 41
@@ -135,28 +171,16 @@ class SolveOptions:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _choice("solver", self.solver, SOLVERS)
-        _choice("transcription", self.transcription, TRANSCRIPTIONS)
-        _choice("hessian", self.hessian, HESSIANS)
+        values = check_table({f.name: getattr(self, f.name) for f in fields(self)},
+                             SOLVE_KEYS, "[solve]")
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
         if self.solver == LM and self.transcription != "simultaneous":
-            raise InputError("solver 'levenberg-marquardt' marches the simultaneous NLP's "
-                             "design; use transcription 'simultaneous'")
-        continuation = _floats("continuation", self.continuation)
-        if not continuation or any(not c > 0 for c in continuation):
-            raise InputError(f"continuation needs positive multipliers, got {self.continuation}")
-        object.__setattr__(self, "continuation", continuation)
-        object.__setattr__(self, "damping", _number("damping", self.damping, lower=0.0))
+            raise InputError("[solve] solver 'levenberg-marquardt' marches the simultaneous "
+                             "NLP's design; use transcription 'simultaneous'")
         if self.solver == LM and not self.damping > 0:
-            raise InputError("solver 'levenberg-marquardt' starts from damping, which must be "
-                             f"positive; got {self.damping}")
-        object.__setattr__(self, "max_iter", _whole("max_iter", self.max_iter, 1))
-        object.__setattr__(self, "tol", _number("tol", self.tol, positive=True))
-        for name in ("time_limit", "stop_rms", "barrier_init"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, _number(name, getattr(self, name),
-                                                       positive=True, optional=True))
-        object.__setattr__(self, "multistart", _whole("multistart", self.multistart, 1))
-        object.__setattr__(self, "seed", _whole("seed", self.seed, 0))
+            raise InputError("[solve] damping must be > 0 with solver 'levenberg-marquardt' "
+                             f"(its first damping), got {self.damping:g}")
         object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
 
     def ipopt_phases(self, done: int) -> list[tuple[str, int]]:
@@ -193,8 +217,7 @@ class SolveOptions:
     @classmethod
     def from_config(cls, table: dict[str, Any]) -> "SolveOptions":
         """Options from a [solve] table; an unknown key is refused with the closest known."""
-        _check_keys("solve", table, [f.name for f in fields(cls)])
-        return cls(**table)
+        return cls(**check_table(table, SOLVE_KEYS, "[solve]"))
 
 
 @dataclass(frozen=True)
@@ -243,39 +266,20 @@ class DesignProblem:
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
             raise InputError("target must be a surface from rq.surfaces (get, Custom, load), "
-                             f"got {type(self.target).__name__}")
-        panels = self.panels
-        if (not isinstance(panels, (list, tuple)) or len(panels) != 2
-                or any(isinstance(p, bool) or not isinstance(p, (int, np.integer))
-                       or p < 4 or p % 2 for p in panels)):
-            raise InputError(f"panels must be two even numbers >= 4 (2N, 2M), got {panels!r}")
-        object.__setattr__(self, "panels", tuple(int(p) for p in panels))
-        if isinstance(self.fix, str) or not isinstance(self.fix, (list, tuple)):
-            raise InputError(f"fix must be a list of groups among {GROUPS}, got {self.fix!r}")
-        object.__setattr__(self, "fix", tuple(self.fix))
-        for name in self.fix:
-            _choice("fix", name, GROUPS)
-        _choice("layout", self.layout, LAYOUTS)
-        for name in ("alpha0", "omega0", "min_angle", "mu_margin", "min_length"):
-            object.__setattr__(self, name, _number(name, getattr(self, name)))
-        bounds = _floats("omega_bounds", self.omega_bounds)
-        if len(bounds) != 2:
-            raise InputError(f"omega_bounds must be two numbers [low, high], got "
-                             f"{self.omega_bounds!r}")
-        object.__setattr__(self, "omega_bounds", bounds)
-        object.__setattr__(self, "weights", _weights(self.weights))
-        if not 0 < self.alpha0 < PI / 2:
-            raise InputError(f"alpha0 must be an acute angle in (0, pi/2), got {self.alpha0}")
-        if not 0 <= self.min_angle < PI / 4:
-            raise InputError(f"min_angle must lie in [0, pi/4), got {self.min_angle}")
-        if not 0 <= self.mu_margin < 1:
-            raise InputError(f"mu_margin must lie in [0, 1), got {self.mu_margin}")
-        if not 0 <= self.min_length:
-            raise InputError(f"min_length must be >= 0, got {self.min_length}")
+                             f"got {describe_value(self.target)}")
+        values = check_table({f.name: getattr(self, f.name) for f in fields(self)
+                              if f.name != "target"}, DESIGN_KEYS, "[design]")
+        values["weights"] = {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0), **values["weights"]}
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+        if not any(self.weights.values()):
+            raise InputError("[design] weights must not all be zero: give position, forms, "
+                             "regularization or smoothness a positive weight")
         lo, hi = self.omega_bounds
-        if not -PI <= lo < hi <= PI or not lo <= self.omega0 <= hi:
-            raise InputError(f"need -pi <= omega_bounds[0] <= omega0 <= omega_bounds[1] <= pi, "
-                             f"got omega0 = {self.omega0}, omega_bounds = {self.omega_bounds}")
+        if not lo < hi or not lo <= self.omega0 <= hi:
+            raise InputError(f"[design] omega_bounds and omega0 need omega_bounds[0] <= omega0 "
+                             f"<= omega_bounds[1] with omega_bounds[0] < omega_bounds[1], got "
+                             f"omega0 = {self.omega0:g}, omega_bounds = [{lo:g}, {hi:g}]")
 
     @property
     def N(self) -> int:
@@ -350,12 +354,15 @@ class DesignProblem:
         Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern).
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
-        Raises :class:`InfeasibleDesign` when the constraints cannot hold,
-        :class:`SolverFailed` (with the solver's status, the statistics, the last iterate and
-        the best admissible one) otherwise, status "non_finite" when the solve ended with a
+        Raises :class:`InputError` before any work when the solve needs more memory than
+        this machine has available (:func:`check_memory`),
+        :class:`InfeasibleDesign` when the constraints cannot hold, :class:`SolverFailed`
+        (with the solver's status, the statistics, the last iterate and the best admissible
+        one) otherwise, status "non_finite" when the solve ended with a
         NaN or inf in the design, the objective or the fit.
         """
         options = _with_overrides(options, overrides)
+        check_memory(self, options)
         if options.multistart != 1:
             return solve_multistart(self, options, callback=callback, warm_start=warm_start,
                                     verbose=verbose)
@@ -580,39 +587,47 @@ class DesignProblem:
         return {**self.to_config(), "solve": options.to_config()}
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> "DesignProblem":
+    def from_config(cls, config: dict[str, Any], root: str | Path | None = None,
+                    trust: bool = False) -> "DesignProblem":
         """The problem of a design file's tables (see :func:`from_config`)."""
-        return from_config(config)[0]
+        return from_config(config, root, trust)[0]
+
+    @classmethod
+    def load(cls, path: str | Path, trust: bool = False) -> "DesignProblem":
+        """The problem of a design file (see :func:`load_design`)."""
+        return load_design(path, trust)[0]
 
 
-def from_config(config: dict[str, Any]) -> tuple[DesignProblem, SolveOptions]:
+def from_config(config: dict[str, Any], root: str | Path | None = None,
+                trust: bool = False) -> tuple[DesignProblem, SolveOptions]:
     """The problem and the options of {"target": ..., "design": ..., "solve": ...} (the
     tables of a design file; [design] and [solve] may be missing). An unknown table or key
-    is refused with the closest known name, a solve option in [design] with where it goes."""
-    if not isinstance(config, dict):
-        raise InputError(f"a design is a set of tables {', '.join(TABLES)}, got "
-                         f"{type(config).__name__}")
-    for name in config:
-        if name not in TABLES:
-            raise InputError(f"unknown table [{name}]{_closest(name, TABLES, '[{}]')}; a design "
-                             f"file has the tables {', '.join(f'[{t}]' for t in TABLES)}")
-        if not isinstance(config[name], dict):
-            raise InputError(f"[{name}] must be a table, got {type(config[name]).__name__}")
-    if "target" not in config:
-        raise InputError("a design needs a [target] table")
-    design = config.get("design", {})
-    solve_keys = [f.name for f in fields(SolveOptions)]
+    is refused with the closest known name, a solve option in [design] with where it goes.
+
+    ``root``: the folder that a target's ``python = "file.py:function"`` is relative to
+    (default: the current folder); ``trust``: run the code a target names
+    (:func:`rffqm_nlp.surfaces.from_config`), refused without it.
+    """
+    tables = check_table(config, FILE_KEYS, "")
+    if "target" not in tables:
+        raise InputError("a design needs a [target] table (name = \"<surface>\" and its "
+                         "parameters, or python = \"file.py:function\" and domain)")
+    design = tables.get("design", {})
     for key in design:
-        if key in solve_keys:
+        if key in SOLVE_KEYS:
             raise InputError(f"[design] {key} is a solve option: move it to the [solve] table")
-    _check_keys("design", design, [f.name for f in fields(DesignProblem) if f.name != "target"])
-    problem = DesignProblem(target=surfaces.from_config(config["target"]), **design)
-    return problem, SolveOptions.from_config(config.get("solve", {}))
+    design = check_table(design, DESIGN_KEYS, "[design]")
+    options = SolveOptions.from_config(tables.get("solve", {}))
+    target = surfaces.from_config(tables["target"], root=root, trust=trust)
+    return DesignProblem(target=target, **design), options
 
 
-def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
+def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, SolveOptions]:
     """The problem and the options of a design file (TOML with the tables [target],
     [design] and [solve]), e.g. ``problem, options = load_design("targets/sphere_cap.toml")``.
+
+    A target's ``python = "file.py:function"`` is relative to the file's folder; the code a
+    target names runs only with ``trust=True`` (for files you trust).
 
     A file whose suffix names a format trimesh reads (:func:`rffqm_nlp.meshes.is_mesh_file`:
     OBJ, STL, PLY, OFF, GLB, XYZ, ...) is a mesh or point cloud: its
@@ -622,7 +637,92 @@ def load_design(path: str | Path) -> tuple[DesignProblem, SolveOptions]:
 
     if is_mesh_file(path):
         return DesignProblem(surfaces.Mesh(Path(path).absolute())), SolveOptions()
-    return from_config(read_toml(path, "design file"))
+    return from_config(read_toml(path, "design file"), Path(path).parent, trust)
+
+
+# ---------------------------------------------------------------------- memory
+#: The memory model of :func:`memory_estimate` (bytes), fitted to the peaks measured on the
+#: sphere cap, quarter vase and hyperboloid up to 200 x 200 panels (docs/solvers.md): what
+#: every solve holds (Python, CasADi, the NLP) ...
+MEMORY_BASE = 150e6
+#: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
+#: transcriptions with MUMPS' factor; "levenberg-marquardt": the marching and the sparse
+#: model, besides the dense sensitivity) ...
+MEMORY_PER_PANEL = {"levenberg-marquardt": 66e3, "simultaneous": 190e3, "sequential": 250e3}
+#: ... the sequential NLP's derivative build on top ...
+MEMORY_SEQUENTIAL_BUILD = 700e6
+#: ... and for Levenberg-Marquardt its dense sensitivity of the marched unknowns (about
+#: 13 per panel) to the design variables (about 3 per panel row and column), 8 bytes each,
+#: held about this many times at the peak.
+LM_SENSITIVITY_COPIES = 1.21
+
+
+def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None) -> int:
+    """Bytes that solving ``problem`` with ``options`` needs at its peak (a model fitted to
+    measurements, see :data:`MEMORY_BASE`; a multistart solves one start at a time).
+
+    For 2N x 2M panels (P = 2N, Q = 2M): Levenberg-Marquardt needs MEMORY_BASE +
+    MEMORY_PER_PANEL * P Q + LM_SENSITIVITY_COPIES * 8 * (13 P Q) * 3 (P + Q); IPOPT
+    MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
+    the sequential transcription)."""
+    options = options or SolveOptions()
+    P, Q = (float(p) for p in problem.panels)
+    if options.solver == LM:
+        dense = 8.0 * (13.0 * P * Q) * (3.0 * (P + Q))
+        need = MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + LM_SENSITIVITY_COPIES * dense
+    else:
+        need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q
+        if options.transcription == "sequential":
+            need += MEMORY_SEQUENTIAL_BUILD
+    return int(min(need, 2.0 ** 62))
+
+
+def available_memory() -> int | None:
+    """Bytes this process can still use: /proc/meminfo's MemAvailable (else the free
+    physical pages), lowered to what a cgroup (v2) memory limit leaves; None if unknown."""
+    have = None
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    have = int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    if have is None:
+        try:
+            have = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            return None
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = int(Path("/sys/fs/cgroup/memory.current").read_text())
+        if limit != "max":
+            have = min(have, int(limit) - used)
+    except (OSError, ValueError):
+        pass
+    return max(have, 0)
+
+
+def check_memory(problem: DesignProblem, options: SolveOptions | None = None) -> None:
+    """Refuse, before any work, a solve that needs more memory (:func:`memory_estimate`)
+    than this machine has available (:func:`available_memory`): one :class:`InputError`
+    line with the estimate and the limit."""
+    options = options or SolveOptions()
+    need, have = memory_estimate(problem, options), available_memory()
+    if have is not None and need > have:
+        P, Q = problem.panels
+        raise InputError(f"[design] panels = [{P}, {Q}] needs about {_gigabytes(need)} GB with "
+                         f"solver {options.solver}; this machine has {_gigabytes(have)} GB "
+                         "available; choose fewer panels")
+
+
+def _gigabytes(size: float) -> str:
+    """A size in GB for a message: "0.35", "22", "4.1e5"."""
+    gb = size / 1e9
+    if gb < 1000:
+        return f"{gb:.2g}"
+    mantissa, exponent = f"{gb:.1e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
 
 
 def design_fit(folded: np.ndarray, target_points: np.ndarray,
@@ -727,81 +827,27 @@ def _require_finite(values: dict[str, Any], stats: SolveStats, x: np.ndarray) ->
 def _with_overrides(options: SolveOptions | None, overrides: dict[str, Any]) -> SolveOptions:
     """``options`` (default SolveOptions()) with SolveOptions fields given by name."""
     if options is not None and not isinstance(options, SolveOptions):
-        raise InputError(f"options must be a SolveOptions, got {type(options).__name__}")
-    _check_keys("solve", overrides, [f.name for f in fields(SolveOptions)], "solve() option")
+        raise InputError(f"options must be a SolveOptions, got {describe_value(options)}")
+    for key in overrides:
+        if key not in SOLVE_KEYS:
+            raise InputError(f"solve(): {unknown_key(key, SOLVE_KEYS, '[solve]')}")
     return replace(options or SolveOptions(), **overrides)
 
 
 # ---------------------------------------------------------------------- validation
-def _check_keys(table: str, mapping: dict[str, Any], known: list[str],
-                what: str | None = None) -> None:
-    """Refuse a key of ``mapping`` not in ``known``, naming the closest known one."""
-    for key in mapping:
-        if key not in known:
-            hint = _closest(str(key), known) or f"; known: {', '.join(sorted(known))}"
-            raise InputError(f"unknown {what or f'[{table}] key'} {key!r}{hint}")
-
-
-def _closest(name: str, known, form: str = "{!r}") -> str:
-    close = difflib.get_close_matches(name, list(known), n=1)
-    return f"; did you mean {form.format(close[0])}?" if close else ""
-
-
-def _number(name: str, value: Any, lower: float | None = None, positive: bool = False,
-            optional: bool = False) -> float:
-    """``value`` as a finite float (> 0 when ``positive``, >= ``lower``), else InputError."""
-    if (isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating))
-            or not math.isfinite(value)):
-        raise InputError(f"{name} must be a finite number{' or None' if optional else ''}, "
-                         f"got {value!r}")
-    if positive and not value > 0:
-        raise InputError(f"{name} must be positive, got {value!r}")
-    if lower is not None and value < lower:
-        raise InputError(f"{name} must be >= {lower}, got {value!r}")
-    return float(value)
-
-
-def _whole(name: str, value: Any, lower: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lower:
-        raise InputError(f"{name} must be a whole number >= {lower}, got {value!r}")
-    return int(value)
-
-
-def _floats(name: str, values: Any) -> tuple[float, ...]:
-    if isinstance(values, (str, bytes)) or not isinstance(values, (list, tuple)):
-        raise InputError(f"{name} must be a list of numbers, got {values!r}")
-    return tuple(_number(f"{name}[{i}]", v) for i, v in enumerate(values))
-
-
-def _weights(weights: Any) -> dict[str, float]:
-    """The loss weights with every key of DEFAULT_WEIGHTS (missing ones 0), checked."""
-    allowed = (f"weights take finite non-negative numbers for {', '.join(DEFAULT_WEIGHTS)}, "
-               "not all zero")
-    if not isinstance(weights, dict):
-        raise InputError(f"{allowed}; got {weights!r}")
-    _check_keys("design.weights", weights, list(DEFAULT_WEIGHTS), "weight")
-    out = {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0),
-           **{k: _number(f"weights.{k}", v, lower=0.0) for k, v in weights.items()}}
-    if not any(out.values()):
-        raise InputError(f"{allowed}; got {weights!r}")
-    return out
-
-
-def _ipopt_options(options: dict) -> dict[str, str | int | float]:
-    """``options`` with any "ipopt." prefix dropped, checked by building a small IPOPT
-    solver with them (CasADi rejects unknown names, IPOPT values of the wrong type or out
-    of range)."""
-    if not isinstance(options, dict):
-        raise InputError(f"ipopt_options must be a dict of IPOPT options, got {options!r}")
+def _ipopt_options(options: dict[str, Any]) -> dict[str, str | int | float]:
+    """``options`` (checked by :data:`SOLVE_KEYS`) with any "ipopt." prefix dropped, checked
+    by building a small IPOPT solver with them (CasADi rejects unknown names, IPOPT values of
+    the wrong type or out of range)."""
     out: dict[str, str | int | float] = {}
     for key, value in options.items():
-        name = str(key).removeprefix("ipopt.")
+        name = key.removeprefix("ipopt.")
+        if not re.fullmatch(r"[a-z0-9_]{1,40}", name):
+            raise InputError(f"{key_name('[solve] ipopt_options', key)} is not an IPOPT option "
+                             "name (lower-case letters, digits and _)")
         if name in IPOPT_FIELDS:
-            raise InputError(f"ipopt_options: set {name} through SolveOptions' "
+            raise InputError(f"[solve] ipopt_options: set {name} through SolveOptions' "
                              f"{IPOPT_FIELDS[name]}, not ipopt_options")
-        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
-            raise InputError(f"ipopt_options: {name} = {value!r} must be a number or a string "
-                             "(IPOPT's yes/no options take 'yes' or 'no')")
         out[name] = value
     if out:
         x = ca.MX.sym("x")
@@ -813,13 +859,9 @@ def _ipopt_options(options: dict) -> dict[str, str | int | float]:
             reason = str(exc).strip().splitlines()[-1].split(": ", 1)[-1]
             if reason.startswith("Invalid options"):
                 reason += " It printed which and why above."
-            raise InputError(f"IPOPT rejects ipopt_options {out}: {reason}") from None
+            raise InputError(f"IPOPT rejects [solve] ipopt_options ({', '.join(out)}): "
+                             f"{reason}") from None
     return out
-
-
-def _choice(name: str, value: str, options: tuple[str, ...]) -> None:
-    if value not in options:
-        raise InputError(f"{name} must be one of {options}, got {value!r}")
 
 
 def _violation_report(nlp: transcription.NLP, sol) -> str:
@@ -930,7 +972,8 @@ def multistart_starts(problem: DesignProblem, starts: int, seed: int) -> list[tu
     ``starts - 1`` seeded uniform perturbations by :data:`MULTISTART_SPREAD`, clipped to
     alpha0 in [min_angle + 0.05, pi/2 - 0.05] and omega0 inside ``omega_bounds`` (5% of
     their width away from each end)."""
-    starts, seed = _whole("multistart", starts, 1), _whole("seed", seed, 0)
+    starts = check_value(starts, SOLVE_KEYS["multistart"], "[solve] multistart")
+    seed = check_value(seed, SOLVE_KEYS["seed"], "[solve] seed")
     rng = np.random.default_rng(seed)
     lo, hi = problem.omega_bounds
     margin = 0.05 * (hi - lo)

@@ -22,8 +22,12 @@ point cloud becomes a surface with :class:`Mesh` (module ``rffqm_nlp.meshes``).
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import importlib.util
 import math
+import re
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -38,8 +42,8 @@ from scipy.optimize import brentq
 from scipy.spatial import ConvexHull, cKDTree
 
 from . import backend
-from .errors import SurfaceError
-from .files import read_toml
+from .errors import InputError, SurfaceError, one_line
+from .files import Key, check_table, check_value, describe_value, read_toml
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
@@ -358,7 +362,8 @@ class Custom(Surface):
     CasADi-compatible math: arithmetic, ``casadi.sin`` etc., or :func:`mathlib`
     (``m = mathlib(u, v); m.sin(u)``). It is checked once on symbols and once on numbers
     (the domain's centre); a wrong result raises SurfaceError. ``reference`` is the
-    ``"module:function"`` it was imported from, if any (used by :meth:`to_config`).
+    ``"module:function"`` or ``"/path/file.py:function"`` it was loaded from, if any (used
+    by :meth:`to_config`).
     """
 
     def __init__(self, fn: Callable[[Any, Any], Any], domain: Any, name: str = "custom",
@@ -377,7 +382,8 @@ class Custom(Surface):
         return _xyz(self._fn, u, v, "CasADi SX symbols", ca.SX)
 
     def to_config(self) -> dict:
-        """``{"python": "module:function", "domain": ...}``; needs an importable function."""
+        """``{"python": reference, "domain": ...}``: the reference it was loaded from, else
+        "module:function" of an importable function."""
         ref = self.reference or _reference_of(self._fn)
         if ref is None:
             raise SurfaceError(
@@ -411,31 +417,99 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
 
 
 def _reference_of(fn: Callable) -> str | None:
-    """``"module:qualname"`` if importing that gives back ``fn`` itself, else None."""
+    """``"module:qualname"`` if that module, already imported, holds ``fn`` itself, else
+    None."""
     module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
-    if not module or "<" in qualname:
+    if not module or "<" in qualname or module not in sys.modules:
         return None
-    ref = f"{module}:{qualname}"
     try:
-        return ref if _import_reference(ref) is fn else None
+        found = _attribute(sys.modules[module], qualname, f"{module}:{qualname}")
     except SurfaceError:
         return None
+    return f"{module}:{qualname}" if found is fn else None
+
+
+#: A Python name path (``package.module``, ``function``, ``Class.method``).
+_DOTTED = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
+#: A Python file: a path ending in .py, without control characters or colons.
+_PY_FILE = re.compile(r"[^\x00-\x1f\x7f:]+\.py")
+_REFERENCE_FORMS = ('"file.py:function" (a Python file, relative to the target file) or '
+                    '"package.module:function" (an installed module)')
+
+
+def parse_reference(ref: Any) -> tuple[str, str, str]:
+    """("file" or "module", the file or module, the function's name) of a target's
+    ``python = ...``; :class:`SurfaceError` for anything of neither form."""
+    where, sep, qualname = ref.rpartition(":") if isinstance(ref, str) else ("", "", "")
+    if sep and len(ref) <= 300 and _DOTTED.fullmatch(qualname):
+        if _PY_FILE.fullmatch(where):
+            return "file", where, qualname
+        if _DOTTED.fullmatch(where):
+            return "module", where, qualname
+    raise SurfaceError(f"[target] python must have the form {_REFERENCE_FORMS}, got "
+                       f"{describe_value(ref)}")
+
+
+def resolve_reference(ref: Any, root: str | Path | None = None) -> str:
+    """``ref`` with a file made absolute (relative to ``root``, default the current folder);
+    a module reference unchanged."""
+    kind, where, qualname = parse_reference(ref)
+    if kind == "module":
+        return ref
+    return f"{Path(root or '.').joinpath(where).absolute()}:{qualname}"
+
+
+def _code_of(ref: str) -> str:
+    """What loading ``ref`` (resolved) runs, for the messages."""
+    kind, where, qualname = parse_reference(ref)
+    if kind == "file":
+        return f"would run the Python file {where} (all of it) and call {qualname}"
+    return f"would import the installed module {where} (running its code) and call {qualname}"
 
 
 def _import_reference(ref: str) -> Callable:
-    """Import ``"package.module:function"`` (no expression is ever evaluated)."""
-    module_name, sep, qualname = str(ref).partition(":")
-    if not sep or not module_name or not qualname:
-        raise SurfaceError(f"python = {ref!r} must have the form \"package.module:function\"")
+    """The function of a resolved ``ref``: the file run as a module of its own
+    (:func:`importlib.util.spec_from_file_location`), or the module imported by name."""
+    kind, where, qualname = parse_reference(ref)
+    if kind == "file":
+        return _attribute(_run_file(Path(where)), qualname, ref)
     try:
-        obj: Any = importlib.import_module(module_name)
-        for attr in qualname.split("."):
-            obj = getattr(obj, attr)
-    except (ImportError, AttributeError) as err:
-        raise SurfaceError(f"cannot import python = {ref!r}: {err}; check the module is on "
-                           f"sys.path and the function name is spelled right") from err
+        module = importlib.import_module(where)
+    except Exception as err:
+        raise SurfaceError(f"[target] python: cannot import the module {where} "
+                           f"({type(err).__name__}: {one_line(err)}); check it is installed "
+                           "or use python = \"file.py:function\"") from err
+    return _attribute(module, qualname, ref)
+
+
+def _run_file(path: Path) -> Any:
+    """The module made by running the Python file ``path``, registered under a name of its
+    own (so dataclasses and pickling inside it work)."""
+    if not path.is_file():
+        raise SurfaceError(f"[target] python: no such Python file {path} (a file is relative "
+                           "to the target file)")
+    name = "rffqm_target_" + hashlib.sha256(str(path).encode()).hexdigest()[:16]
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception as err:
+        del sys.modules[name]
+        raise SurfaceError(f"[target] python: running {path} raised {type(err).__name__}: "
+                           f"{one_line(err)}") from err
+    return module
+
+
+def _attribute(obj: Any, qualname: str, ref: str) -> Callable:
+    """``obj.<qualname>``, which must be callable."""
+    for attr in qualname.split("."):
+        if not hasattr(obj, attr):
+            raise SurfaceError(f"[target] python: {ref} has no function {qualname}; check "
+                               "the name is spelled right")
+        obj = getattr(obj, attr)
     if not callable(obj):
-        raise SurfaceError(f"python = {ref!r} is not a callable")
+        raise SurfaceError(f"[target] python: {qualname} of {ref} is not a function")
     return obj
 
 
@@ -682,32 +756,58 @@ def _spec(name: str) -> _Spec:
     return _BUILTINS[name]
 
 
-def from_config(table: Mapping[str, Any]) -> Surface:
+#: ``domain = [[u0, u1], [v0, v1]]`` of a [target] table.
+DOMAIN_KEY = Key("list", length=2, item=Key("list", length=2, item=Key("number")),
+                 hint="([[u0, u1], [v0, v1]])")
+#: The keys of a [target] table with python = ...
+PYTHON_KEYS = {"python": Key("string", required=True),
+               "domain": Key("list", length=2, item=DOMAIN_KEY.item, required=True,
+                             hint=DOMAIN_KEY.hint)}
+
+
+def target_keys(name: str) -> dict[str, Key]:
+    """The keys of a [target] table naming the built-in ``name``: name, domain and its
+    parameters."""
+    return {"name": Key("choice", choices=tuple(_BUILTINS)), "domain": DOMAIN_KEY,
+            **{param: Key("number") for param in _spec(name).defaults}}
+
+
+def from_config(table: Mapping[str, Any], root: str | Path | None = None,
+                trust: bool = False) -> Surface:
     """The surface of a ``[target]`` table: ``name = "..."`` plus parameters and an optional
-    ``domain = [[u0, u1], [v0, v1]]``, or ``python = "package.module:function"`` plus a
-    required ``domain``."""
-    table = dict(table)
+    ``domain = [[u0, u1], [v0, v1]]``, or ``python = "file.py:function"`` (a file relative to
+    ``root``, default the current folder) or ``python = "package.module:function"``, plus a
+    required ``domain``.
+
+    Code named by ``python`` runs only with ``trust=True`` (a target file from someone else
+    must not run code unless asked to); without it :class:`SurfaceError` names the code.
+    Every key is checked (:func:`rffqm_nlp.files.check_table`).
+    """
+    if not isinstance(table, Mapping):
+        raise SurfaceError(f"[target] must be a table, got {describe_value(table)}")
     if not rebuildable(table):
         raise SurfaceError(
             f"[target] cannot be rebuilt: the target of this result was {table.get('made_from')} "
             "and no config names it; rebuild the problem by passing the surface: "
             "DesignProblem(target=<your surface>, **result.problem['design']), or in a file "
             "name a function with python = \"file.py:function\" and domain")
+    if "python" in table and "name" in table:
+        raise SurfaceError("[target] takes name (a built-in surface) or python (your own "
+                           "function), not both")
     if "python" in table:
-        extra = sorted(set(table) - {"python", "domain"})
-        if extra:
-            raise SurfaceError(f"unknown key(s) {', '.join(extra)} next to python = ...; a "
-                               f"python target takes only python and domain")
-        if "domain" not in table:
-            raise SurfaceError("a python = \"module:function\" target needs "
-                               "domain = [[u0, u1], [v0, v1]]")
-        ref = table["python"]
-        return Custom(_import_reference(ref), table["domain"], reference=ref)
+        values = _checked(table, PYTHON_KEYS)
+        ref = resolve_reference(values["python"], root)
+        if not trust:
+            raise SurfaceError(f"[target] python = \"{ref}\" {_code_of(ref)}; pass --trust "
+                               "(trust=True in the API) if you trust that file")
+        return Custom(_import_reference(ref), values["domain"], reference=ref)
     if "name" not in table:
         raise SurfaceError("the [target] table needs name = \"<surface>\" (one of "
-                           f"{', '.join(_BUILTINS)}) or python = \"module:function\"")
-    name = table.pop("name")
-    return get(name, table.pop("domain", None), **table)
+                           f"{', '.join(_BUILTINS)}) or python = \"file.py:function\"")
+    name = _checked_value(table["name"], Key("choice", choices=tuple(_BUILTINS)), "[target] name")
+    values = _checked(table, target_keys(name))
+    values.pop("name")
+    return get(name, values.pop("domain", None), **values)
 
 
 def config_of(surface: Surface) -> dict:
@@ -734,12 +834,28 @@ def rebuildable(table: Mapping[str, Any]) -> bool:
     return "rebuildable" not in table
 
 
-def load(path: str | Path) -> Surface:
-    """The surface of the ``[target]`` table of a TOML design file."""
+def _checked(table: Mapping[str, Any], spec: dict[str, Key]) -> dict[str, Any]:
+    """check_table for [target], raising SurfaceError."""
+    try:
+        return check_table(table, spec, "[target]")
+    except InputError as exc:
+        raise SurfaceError(str(exc)) from None
+
+
+def _checked_value(value: Any, key: Key, name: str) -> Any:
+    try:
+        return check_value(value, key, name)
+    except InputError as exc:
+        raise SurfaceError(str(exc)) from None
+
+
+def load(path: str | Path, trust: bool = False) -> Surface:
+    """The surface of the ``[target]`` table of a TOML design file (``python = ...`` relative
+    to the file's folder, run only with ``trust``)."""
     data = read_toml(path, "design file", SurfaceError)
     if not isinstance(data.get("target"), dict):
         raise SurfaceError(f"{path} has no [target] table")
-    return from_config(data["target"])
+    return from_config(data["target"], root=Path(path).parent, trust=trust)
 
 
 # -- validation helpers -------------------------------------------------------------------

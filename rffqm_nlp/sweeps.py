@@ -65,10 +65,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .design import DesignProblem, SolveOptions
+from .design import FILE_KEYS, DesignProblem, SolveOptions, check_memory
 from .design import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
-from .files import atomic_path, read_toml
+from .files import (Key, atomic_path, check_table, check_value, describe_value, read_toml,
+                    shown_name)
+from .surfaces import resolve_reference
 from .results import DesignResult, Fit, SolveStats
 
 if TYPE_CHECKING:
@@ -78,8 +80,10 @@ if TYPE_CHECKING:
 
 #: Tables a swept key may address ("<table>.<key>").
 TABLES = ("target", "design", "solve")
-#: Top-level keys of a study file.
-STUDY_KEYS = ("base", "description", "target", "design", "solve", "sweep")
+#: What each top-level key of a study file allows (the tables' keys: DesignProblem's,
+#: SolveOptions' and :meth:`Study.from_config`).
+STUDY_FILE_KEYS = {"base": Key("string"), "description": Key("string"),
+                   **{table: Key("table") for table in (*TABLES, "sweep")}}
 #: Keys of [sweep] that control the expansion rather than name a parameter.
 SWEEP_CONTROLS = ("sample", "seed", "cases")
 #: Keys of a random range {low, high, log}.
@@ -114,12 +118,12 @@ class Range:
 
     def __post_init__(self) -> None:
         if not (_is_number(self.low) and _is_number(self.high)) or not self.low <= self.high:
-            raise InputError(f"a range needs numbers low <= high, got low = {self.low!r}, "
-                             f"high = {self.high!r}")
+            raise InputError(f"a range needs finite numbers low <= high, got low = "
+                             f"{describe_value(self.low)}, high = {describe_value(self.high)}")
         if not isinstance(self.log, bool):
-            raise InputError(f"log of a range is true or false, got {self.log!r}")
+            raise InputError(f"log of a range is true or false, got {describe_value(self.log)}")
         if self.log and not self.low > 0:
-            raise InputError(f"a log range needs low > 0, got {self.low!r}")
+            raise InputError(f"a log range needs low > 0, got {self.low:g}")
 
     def draw(self, rng: np.random.Generator, integer: bool = False) -> float | int:
         """One value drawn from this range (a whole number in it when ``integer``)."""
@@ -147,10 +151,12 @@ class Design:
     params: dict[str, Any]
     config: dict[str, Any]
     case: str = ""
+    trust: bool = False
 
     def payload(self) -> dict[str, Any]:
-        """What a task receives: plain data (CasADi objects do not pickle)."""
-        return {"id": self.id, "name": self.name, "config": self.config}
+        """What a task receives: plain data (CasADi objects do not pickle); ``trust``: the
+        study was loaded trusting the code its target names."""
+        return {"id": self.id, "name": self.name, "config": self.config, "trust": self.trust}
 
 
 @dataclass(frozen=True)
@@ -161,7 +167,9 @@ class Study:
     key -> list of values (or :class:`Range` with ``sample``); ``cases``: explicit
     combinations (dotted key -> value, plus an optional "name"), crossed with the grid;
     ``sample``: draw this many designs instead of the grid, with ``seed``; ``source``: the
-    study file, named in the errors of :meth:`designs`.
+    study file, named in the errors of :meth:`designs`; ``root``: the folder that a target's
+    ``python = "file.py:function"`` is relative to; ``trust``: run the code a target names
+    (refused without it, see :func:`rffqm_nlp.surfaces.from_config`).
     """
 
     base: dict[str, Any]
@@ -171,6 +179,8 @@ class Study:
     seed: int = 0
     description: str = ""
     source: str = ""
+    root: str = "."
+    trust: bool = False
 
     def __post_init__(self) -> None:
         unknown = set(self.base) - set(TABLES)
@@ -187,7 +197,8 @@ class Study:
                                      "sample = K draws from; give a list of values for a grid")
             elif not isinstance(values, (list, tuple)) or not values:
                 raise InputError(f"[sweep] {key} must be a non-empty list of values (or "
-                                 f"{{low, high}} with sample = K), got {values!r}; put a "
+                                 f"{{low, high}} with sample = K), got "
+                                 f"{describe_value(values)}; put a "
                                  f"fixed setting in the [{key.split('.')[0]}] table instead")
         object.__setattr__(self, "parameters", {k: v if isinstance(v, Range) else list(v)
                                                 for k, v in self.parameters.items()})
@@ -200,54 +211,38 @@ class Study:
                 if key in self.parameters:
                     raise InputError(f"{key} is both a [sweep] parameter and set by "
                                      f"[[sweep.cases]] #{i + 1}; keep one")
-        if self.sample is not None and (isinstance(self.sample, bool)
-                                        or not isinstance(self.sample, int) or self.sample < 1):
-            raise InputError(f"[sweep] sample must be a whole number >= 1, got {self.sample!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise InputError(f"[sweep] seed must be a whole number >= 0, got {self.seed!r}")
+        if self.sample is not None:
+            check_value(self.sample, Key("whole", low=1), "[sweep] sample")
+        check_value(self.seed, Key("whole", low=0), "[sweep] seed")
 
     # -------------------------------------------------------------- loading
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Study":
-        """A study from its TOML file; ``base`` paths are relative to the file."""
+    def load(cls, path: str | os.PathLike, trust: bool = False) -> "Study":
+        """A study from its TOML file; ``base`` and a target's ``python = "file.py:..."``
+        are relative to the file; ``trust``: run the code a target names."""
         path = Path(path)
         config = read_toml(path, "study file")
         try:
-            return replace(cls.from_config(config, root=path.parent), source=str(path))
+            return replace(cls.from_config(config, root=path.parent, trust=trust),
+                           source=str(path))
         except InputError as exc:
             raise InputError(f"{path}: {exc}") from None
 
     @classmethod
-    def from_config(cls, config: Mapping[str, Any], root: str | os.PathLike = ".") -> "Study":
+    def from_config(cls, config: Mapping[str, Any], root: str | os.PathLike = ".",
+                    trust: bool = False) -> "Study":
         """A study from the tables of a study file (``base`` relative to ``root``)."""
-        unknown = set(config) - set(STUDY_KEYS)
-        if unknown:
-            raise InputError(f"unknown study key(s) {sorted(unknown)}; a study file has "
-                             f"{', '.join(STUDY_KEYS)}")
+        config = check_table(config, STUDY_FILE_KEYS, "")
         base: dict[str, dict] = {table: {} for table in TABLES}
         if "base" in config:
-            base_path = Path(root) / str(config["base"])
-            if not base_path.is_file():
-                raise InputError(f"base = {config['base']!r}: no such design file "
-                                 f"{base_path} (paths are relative to the study file)")
-            base_file = read_toml(base_path, "base file")
-            extra = set(base_file) - set(TABLES)
-            if extra:
-                raise InputError(f"base file {base_path} has table(s) {sorted(extra)}; a "
-                                 "design file has [target], [design] and [solve]")
-            for table in TABLES:
-                base[table].update(base_file.get(table, {}))
+            for table, values in _base_tables(config["base"], Path(root)).items():
+                base[table].update(values)
         for table in TABLES:
             inline = config.get(table, {})
-            if not isinstance(inline, dict):
-                raise InputError(f"{table} must be a table, got {inline!r}")
             if table == "target" and ("name" in inline or "python" in inline):
                 base["target"] = {}
             base[table].update(inline)
-        spec = config.get("sweep", {})
-        if not isinstance(spec, dict):
-            raise InputError(f"sweep must be a table, got {spec!r}")
-        spec = dict(spec)
+        spec = dict(config.get("sweep", {}))
         cases = spec.pop("cases", [])
         if not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
             raise InputError("sweep.cases must be an array of tables: [[sweep.cases]]")
@@ -267,7 +262,7 @@ class Study:
             named_cases.append(flat)
         return cls(base=base, parameters=parameters, cases=tuple(named_cases), sample=sample,
                    seed=0 if seed is None else seed,
-                   description=str(config.get("description", "")))
+                   description=config.get("description", ""), root=str(root), trust=trust)
 
     # -------------------------------------------------------------- expansion
     @property
@@ -328,9 +323,9 @@ class Study:
             label = " ".join(f"{short[k]}={_label(v)}" for k, v in overrides.items()
                              if case is None or k in self.parameters)
             name = " ".join(p for p in (case, label) if p) or "base"
-            config = design_config(self.base, overrides, name)
+            config = design_config(self.base, overrides, name, self.root, self.trust)
             design = Design(id=design_id(config), name=name, params=overrides, config=config,
-                            case=case or "")
+                            case=case or "", trust=self.trust)
             if design.id in seen:
                 raise InputError(f"designs {seen[design.id]!r} and {name!r} are the same problem "
                                  f"(id {design.id}); remove the duplicate value")
@@ -340,13 +335,16 @@ class Study:
 
 
 def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
-                  name: str = "design") -> dict[str, Any]:
+                  name: str = "design", root: str | os.PathLike = ".",
+                  trust: bool = False) -> dict[str, Any]:
     """The full configuration {"target", "design", "solve"} of ``base`` with the dotted
     ``overrides`` applied, every default filled in (via :class:`DesignProblem` and
-    :class:`SolveOptions`), validated.
+    :class:`SolveOptions`), validated, and refused when this machine cannot hold its solve
+    (:func:`rffqm_nlp.design.check_memory`).
 
     Setting target.name or target.python starts the target table afresh; an integer p as
-    design.panels means (p, p).
+    design.panels means (p, p); ``root`` and ``trust`` as for
+    :func:`rffqm_nlp.design.from_config`.
     """
     tables = {table: dict(base.get(table, {})) for table in TABLES}
     if "target.name" in overrides or "target.python" in overrides:
@@ -358,7 +356,8 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
     if isinstance(panels, int) and not isinstance(panels, bool):
         tables["design"]["panels"] = [panels, panels]
     try:
-        problem, options = problem_from_config(tables)
+        problem, options = problem_from_config(tables, root, trust)
+        check_memory(problem, options)
     except InputError as exc:
         raise InputError(f"design {name!r}: {exc}") from None
     except (TypeError, ValueError) as exc:
@@ -390,7 +389,7 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
     row: dict[str, Any] = {"worker": _worker_name(), "host": socket.gethostname()}
     result = None
     try:
-        problem, options = problem_from_config(config)
+        problem, options = problem_from_config(config, trust=bool(payload.get("trust")))
         with one_thread():
             result = problem.solve(options)
     except InfeasibleDesign as exc:
@@ -746,10 +745,36 @@ def _require_extra(serial: bool) -> None:
         raise RffqmError(f"sweeps need {', '.join(missing)}: pip install 'rffqm_nlp[sweep]'")
 
 
+def _base_tables(base: Any, root: Path) -> dict[str, dict[str, Any]]:
+    """The tables of the design file ``base`` (relative to ``root``), a target's
+    ``python = "file.py:..."`` made relative to that file. Anything but the path of a .toml
+    file is refused before it is opened; no message quotes the file's content."""
+    check_value(base, Key("string"), "base")
+    path = root / base
+    if path.suffix != ".toml":
+        raise InputError(f"base must name a design file ending in .toml, got "
+                         f"{describe_value(base)}")
+    if not path.exists():
+        raise InputError(f"base: no such design file {path} (paths are relative to the "
+                         "study file)")
+    try:
+        tables = check_table(read_toml(path, "base file"), FILE_KEYS, "")
+    except InputError as exc:
+        raise InputError(f"base file {path}: {exc}") from None
+    target = tables.get("target", {})
+    if "python" in target:
+        try:
+            tables["target"] = {**target, "python": resolve_reference(target["python"],
+                                                                      path.parent)}
+        except InputError as exc:
+            raise InputError(f"base file {path}: {exc}") from None
+    return tables
+
+
 def _check_key(key: str, where: str = "[sweep]") -> None:
     table, _, item = key.partition(".")
     if table not in TABLES or not item or "." in item:
-        raise InputError(f"{where}: {key!r} is not a parameter; name one as "
+        raise InputError(f"{where}: {shown_name(key)} is not a parameter; name one as "
                          f"\"<table>.<key>\" with table one of {', '.join(TABLES)} (e.g. "
                          "\"target.radius\", \"design.panels\", \"solve.seed\")")
     known = {"design": [f.name for f in dataclasses.fields(DesignProblem)
@@ -760,7 +785,7 @@ def _check_key(key: str, where: str = "[sweep]") -> None:
         hint = f"did you mean {table}.{close[0]}?" if close else f"known: {', '.join(known)}"
         if table == "design" and item in _solve_keys():
             hint = f"it is a solve option: sweep \"solve.{item}\""
-        raise InputError(f"{where}: unknown {table} key {item!r}; {hint}")
+        raise InputError(f"{where}: unknown {table} key {shown_name(item)}; {hint}")
 
 
 def _solve_keys() -> list[str]:
@@ -778,7 +803,7 @@ def _dotted(table: Mapping[str, Any], where: str) -> Iterator[tuple[str, Any]]:
             for item, inner in value.items():
                 yield f"{key}.{item}", inner
         else:
-            raise InputError(f"{where}: {key!r} is not a parameter; name one as "
+            raise InputError(f"{where}: {shown_name(key)} is not a parameter; name one as "
                              f"\"<table>.<key>\" with table one of {', '.join(TABLES)}"
                              + (f" (controls: {', '.join(SWEEP_CONTROLS)})"
                                 if where == "[sweep]" else ""))
@@ -787,7 +812,7 @@ def _dotted(table: Mapping[str, Any], where: str) -> Iterator[tuple[str, Any]]:
 def _range_or_list(key: str, value: Any) -> list | Range:
     if isinstance(value, dict):
         if not {"low", "high"} <= set(value) <= set(RANGE_KEYS):
-            raise InputError(f"[sweep] {key} = {value!r}: a range is {{low = a, high = b}} "
+            raise InputError(f"[sweep] {shown_name(key)}: a range is {{low = a, high = b}} "
                              "(optionally log = true); to sweep tables give a list of them")
         try:
             return Range(**value)
@@ -803,13 +828,24 @@ def _short_names(keys: list[str]) -> dict[str, str]:
 
 
 def _label(value: Any) -> str:
+    """A swept value in a design's name (a long string by its length only: names appear in
+    error messages, which never quote a file's content)."""
     if isinstance(value, float):
         return f"{value:.4g}"
     if isinstance(value, list) and value and all(_is_number(v) for v in value):
         return "x".join(_label(v) for v in value)
     if isinstance(value, (list, dict)):
-        return json.dumps(value, separators=(",", ":"))
-    return str(value)
+        return json.dumps(_shown_strings(value), separators=(",", ":"))
+    return shown_name(value) if isinstance(value, str) else str(value)
+
+
+def _shown_strings(value: Any) -> Any:
+    """``value`` with every string (key or item) as :func:`rffqm_nlp.files.shown_name`."""
+    if isinstance(value, dict):
+        return {shown_name(k): _shown_strings(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_shown_strings(v) for v in value]
+    return shown_name(value) if isinstance(value, str) else value
 
 
 def _cell(value: Any) -> Any:

@@ -353,7 +353,7 @@ def test_design_unknown_target(tmp_path):
     path = tmp_path / "blob.toml"
     path.write_text('[target]\nname = "blob"\n')
     assert_user_error(invoke("design", path, "--out", tmp_path / "o"),
-                      "unknown surface 'blob'", "sphere_cap")
+                      "[target] name must be one of", "got the string 'blob'", "sphere_cap")
     assert not (tmp_path / "o").exists()
 
 

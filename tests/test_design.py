@@ -323,7 +323,7 @@ def test_invalid_options_raise_input_error(kw):
     ({"ipopt.tol": 1e-3}, "through SolveOptions' tol"),
     ({"max_wall_time": 10.0}, "through SolveOptions' time_limit"),
     ({"warm_start_init_point": True}, "'yes' or 'no'"),
-    ("mu_init=1e-3", "must be a dict")])
+    ("mu_init=1e-3", r"ipopt_options must be a table .* got a string of 12 characters")])
 def test_invalid_ipopt_options_are_refused_when_the_problem_is_made(options, match):
     with pytest.raises(rq.InputError, match=match):
         small("sphere_cap", ipopt_options=options)

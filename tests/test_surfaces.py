@@ -298,21 +298,60 @@ def test_python_target_round_trips(tmp_path, monkeypatch):
     toml = tmp_path / "mine.toml"
     toml.write_text('[target]\npython = "user_surface:wavy_sheet"\n'
                     'domain = [[-2.0, 2.0], [-1.5, 1.5]]\n\n[design]\npanels = [4, 4]\n')
-    surface = S.load(toml)
+    surface = S.load(toml, trust=True)
     assert surface.to_config() == {"python": "user_surface:wavy_sheet",
                                    "domain": [[-2.0, 2.0], [-1.5, 1.5]]}
     np.testing.assert_allclose(surface.point(1.0, 0.5),
                                [1.0, 0.5, 0.3 * math.sin(1.0) * math.cos(0.5)], **TOL)
     direct = S.Custom(user_surface.wavy_sheet, ((-2, 2), (-1.5, 1.5)))
     assert direct.to_config() == surface.to_config()
+    unit = [[0, 1], [0, 1]]
     with pytest.raises(SurfaceError, match="three scalars"):
-        S.from_config({"python": "user_surface:flat_pair", "domain": [[0, 1], [0, 1]]})
+        S.from_config({"python": "user_surface:flat_pair", "domain": unit}, trust=True)
     with pytest.raises(SurfaceError, match="needs domain"):
-        S.from_config({"python": "user_surface:wavy_sheet"})
-    with pytest.raises(SurfaceError, match="cannot import"):
-        S.from_config({"python": "user_surface:nope", "domain": [[0, 1], [0, 1]]})
+        S.from_config({"python": "user_surface:wavy_sheet"}, trust=True)
+    with pytest.raises(SurfaceError, match="has no function nope"):
+        S.from_config({"python": "user_surface:nope", "domain": unit}, trust=True)
+    with pytest.raises(SurfaceError, match="cannot import the module no_such_module_x"):
+        S.from_config({"python": "no_such_module_x:f", "domain": unit}, trust=True)
     with pytest.raises(SurfaceError, match="form"):
-        S.from_config({"python": "os.system('true')", "domain": [[0, 1], [0, 1]]})
+        S.from_config({"python": "os.system('true')", "domain": unit}, trust=True)
+
+
+def test_python_file_target_loads_relative_to_the_target_file(tmp_path):
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    (folder / "shapes.py").write_text(
+        "import casadi as ca\n\ndef dome(u, v):\n    return u, v, 0.1 * ca.cos(u) * ca.cos(v)\n")
+    toml = folder / "dome.toml"
+    toml.write_text('[target]\npython = "shapes.py:dome"\ndomain = [[-1.0, 1.0], [-1.0, 1.0]]\n')
+    surface = S.load(toml, trust=True)            # no PYTHONPATH: the file is found by path
+    np.testing.assert_allclose(surface.point(0.0, 0.0), [0.0, 0.0, 0.1], **TOL)
+    config = surface.to_config()
+    assert config["python"] == f"{folder / 'shapes.py'}:dome"
+    again = S.from_config(config, trust=True)     # the absolute path works from anywhere
+    np.testing.assert_allclose(again.sample(4, 4), surface.sample(4, 4), **TOL)
+    with pytest.raises(SurfaceError, match="no such Python file"):
+        S.from_config({"python": "missing.py:dome", "domain": [[0, 1], [0, 1]]},
+                      root=folder, trust=True)
+    (folder / "broken.py").write_text("raise RuntimeError('at import')\n")
+    with pytest.raises(SurfaceError, match="running .*broken.py raised RuntimeError"):
+        S.from_config({"python": "broken.py:f", "domain": [[0, 1], [0, 1]]}, root=folder,
+                      trust=True)
+
+
+@pytest.mark.parametrize("ref, code", [
+    ("shapes.py:dome", r"would run the Python file .*shapes\.py \(all of it\) and call dome"),
+    ("tests_marker_module:f", "would import the installed module tests_marker_module")])
+def test_code_named_by_a_target_runs_only_when_trusted(tmp_path, ref, code):
+    marker = tmp_path / "ran"
+    (tmp_path / "shapes.py").write_text(f"open({str(marker)!r}, 'w').close()\n"
+                                        "def dome(u, v):\n    return u, v, 0 * u\n")
+    toml = tmp_path / "t.toml"
+    toml.write_text(f'[target]\npython = "{ref}"\ndomain = [[0.0, 1.0], [0.0, 1.0]]\n')
+    with pytest.raises(SurfaceError, match=rf"\[target\] python = .*{code}.*pass --trust"):
+        S.load(toml)
+    assert not marker.exists()                    # nothing of the file ran
 
 
 @pytest.mark.parametrize("make, message", [
