@@ -147,12 +147,12 @@ class _Geometry:
 
     def centres(self, Y: np.ndarray) -> np.ndarray:
         """Panel centroids (..., P, 3) of states Y (..., V, 3)."""
-        return Y[..., self.corners, :].mean(axis=-2)
+        return _centroid(Y[..., self.corners, :])
 
     def non_adjacent(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Mask of the pairs that share no vertex (row or column apart by 2 or more)."""
-        d = np.abs(self.ij[p] - self.ij[q])
-        return d.max(axis=1) >= 2
+        i, j = self.ij[:, 0], self.ij[:, 1]
+        return np.maximum(np.abs(i[p] - i[q]), np.abs(j[p] - j[q])) >= 2
 
     def label(self, p: int, q: int) -> PanelPair:
         """1-based panel pair, smaller panel first."""
@@ -167,7 +167,7 @@ def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
     if pq.size == 0:
         return np.zeros((0, 2), dtype=np.int64)
     p, q = pq[:, 0], pq[:, 1]
-    keep = geo.non_adjacent(p, q) & (np.linalg.norm(C[p] - C[q], axis=1)
+    keep = geo.non_adjacent(p, q) & (_norm(C[p] - C[q])
                                      <= geo.radius[p] + geo.radius[q] + reach)
     return pq[keep]
 
@@ -176,14 +176,24 @@ def panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
                    q: np.ndarray) -> np.ndarray:
     """Distances (n,) between panels p and q (n,) in states S[s] (S: (K, V, 3)), 0 on
     contact."""
-    P = S[s[:, None], geo.corners[p]]                               # (n, 4, 3)
-    Q = S[s[:, None], geo.corners[q]]
+    return _quad_distance(S[s[:, None], geo.corners[p]], S[s[:, None], geo.corners[q]],
+                          geo.scale)
+
+
+def _quad_distance(P: np.ndarray, Q: np.ndarray, scale: float) -> np.ndarray:
+    """Distances (n,) between the panels with corners P and Q (n, 4, 3) (a, b, c, d), 0 on
+    contact: the smallest of their four triangle pairs."""
     TP = P[:, _TRIANGLES][:, _TRI_PAIRS[:, 0]]                      # (n, 4, 3, 3)
     TQ = Q[:, _TRIANGLES][:, _TRI_PAIRS[:, 1]]
     TP, TQ = TP.reshape(-1, 3, 3), TQ.reshape(-1, 3, 3)
-    d = np.concatenate([triangle_distance(TP[k:k + CHUNK], TQ[k:k + CHUNK], geo.scale)
+    d = np.concatenate([triangle_distance(TP[k:k + CHUNK], TQ[k:k + CHUNK], scale)
                         for k in range(0, len(TP), CHUNK)] or [np.zeros(0)])
-    return d.reshape(-1, 4).min(axis=1)
+    return _least(d.reshape(-1, 4))
+
+
+def _centroid(Q: np.ndarray) -> np.ndarray:
+    """Centroids (..., 3) of the panel corners Q (..., 4, 3)."""
+    return (Q[..., 0, :] + Q[..., 1, :] + Q[..., 2, :] + Q[..., 3, :]) / 4
 
 
 # --------------------------------------------------------------------------- triangles
@@ -196,17 +206,26 @@ def triangles_intersect(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.
     """
     eA = np.roll(A, -1, axis=1) - A
     eB = np.roll(B, -1, axis=1) - B
-    nA = np.cross(eA[:, 0], eA[:, 1])
-    nB = np.cross(eB[:, 0], eB[:, 1])
-    axes = np.concatenate([
-        nA[:, None], nB[:, None],
-        np.cross(eA[:, :, None], eB[:, None, :]).reshape(-1, 9, 3),
-        np.cross(nA[:, None], eA), np.cross(nB[:, None], eB)], axis=1)  # (n, 17, 3)
-    pA = axes @ A.transpose(0, 2, 1)                                # (n, 17, 3)
-    pB = axes @ B.transpose(0, 2, 1)
-    eps = REL_EPS * scale * np.linalg.norm(axes, axis=2)
-    gap = np.maximum(pB.min(axis=2) - pA.max(axis=2), pA.min(axis=2) - pB.max(axis=2))
-    return ~np.any(gap > eps, axis=1)
+    nA = _cross(eA[:, 0], eA[:, 1])
+    nB = _cross(eB[:, 0], eB[:, 1])
+    hit = ~_separated(np.stack([nA, nB], axis=1), A, B, scale).any(axis=1)
+    k = np.flatnonzero(hit)                  # the normals do not separate: the other 15
+    if k.size:
+        eA, eB, nA, nB = eA[k], eB[k], nA[k], nB[k]
+        axes = np.concatenate([_cross(eA[:, :, None], eB[:, None, :]).reshape(-1, 9, 3),
+                               _cross(nA[:, None], eA), _cross(nB[:, None], eB)], axis=1)
+        hit[k] = ~_separated(axes, A[k], B[k], scale).any(axis=1)
+    return hit
+
+
+def _separated(axes: np.ndarray, A: np.ndarray, B: np.ndarray, scale: float) -> np.ndarray:
+    """Whether each axis (n, k, 3) separates triangles A and B (n, 3, 3) by more than
+    REL_EPS * scale * |axis|: (n, k) bool."""
+    pA = _dot(axes[:, :, None], A[:, None])                          # (n, k, 3)
+    pB = _dot(axes[:, :, None], B[:, None])
+    eps = REL_EPS * scale * _norm(axes)
+    gap = np.maximum(_least(pB) - _most(pA), _least(pA) - _most(pB))
+    return gap > eps
 
 
 def triangle_distance(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.ndarray:
@@ -216,42 +235,40 @@ def triangle_distance(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.nd
     eA = np.roll(A, -1, axis=1)
     eB = np.roll(B, -1, axis=1)
     seg = _segment_distance(A[:, :, None], eA[:, :, None], B[:, None, :], eB[:, None, :])
-    d = seg.reshape(-1, 9).min(axis=1)
-    d = np.minimum(d, _vertex_face_distance(A, B).min(axis=1))
-    d = np.minimum(d, _vertex_face_distance(B, A).min(axis=1))
+    d = _least(seg.reshape(-1, 9))
+    d = np.minimum(d, _least(_vertex_face_distance(A, B)))
+    d = np.minimum(d, _least(_vertex_face_distance(B, A)))
     return np.where(triangles_intersect(A, B, scale), 0.0, d)
 
 
 def _segment_distance(P1, Q1, P2, Q2) -> np.ndarray:
     """Distances between segments [P1, Q1] and [P2, Q2] (broadcast (..., 3)) (Ericson 5.1.9)."""
     d1, d2, r = Q1 - P1, Q2 - P2, P1 - P2
-    a = np.sum(d1 * d1, axis=-1)
-    e = np.sum(d2 * d2, axis=-1)
-    b = np.sum(d1 * d2, axis=-1)
-    c = np.sum(d1 * r, axis=-1)
-    f = np.sum(d2 * r, axis=-1)
+    a = _dot(d1, d1)
+    e = _dot(d2, d2)
+    b = _dot(d1, d2)
+    c = _dot(d1, r)
+    f = _dot(d2, r)
     denom = a * e - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-14 * a * e, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
         t = (b * s + f) / e
         s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
     t = np.clip(t, 0, 1)
-    diff = r + d1 * s[..., None] - d2 * t[..., None]
-    return np.sqrt(np.sum(diff * diff, axis=-1))
+    return _norm(r + d1 * s[..., None] - d2 * t[..., None])
 
 
 def _vertex_face_distance(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Distances (n, 3) from the vertices of A to the plane of B where the foot lies in B,
     inf elsewhere (the other closest features are covered by segment distances)."""
-    n = np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
-    nn = np.sqrt(np.sum(n * n, axis=-1))
+    n = _cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
+    nn = _norm(n)
     inside = np.ones(A.shape[:2], dtype=bool)
     for k in range(3):
         edge = B[:, (k + 1) % 3] - B[:, k]
-        side = (np.cross(edge[:, None], A - B[:, k, None]) @ n[:, :, None])[..., 0]
-        inside &= side >= 0
+        inside &= _dot(_cross(edge[:, None], A - B[:, k, None]), n[:, None]) >= 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        h = np.abs(((A - B[:, 0, None]) @ n[:, :, None])[..., 0]) / nn[:, None]
+        h = np.abs(_dot(A - B[:, 0, None], n[:, None])) / nn[:, None]
     return np.where(inside & (nn[:, None] > 0), h, np.inf)
 
 
@@ -284,29 +301,29 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
     sign = -1.0 if w_max < 0 else 1.0
     W = abs(w_max)
     n_steps = max(1, int(np.ceil(W / MAX_STEP)))
-    omegas = list(np.linspace(0.0, W, n_steps + 1))
-    Y = geo.states(sign * np.asarray(omegas))
-    C = geo.centres(Y)
+    st = _States(geo, sign, np.linspace(0.0, W, n_steps + 1))
     margin = geo.radius.max() + clearance
-    near = [_near_pairs(geo, c, margin) for c in C]
-    S = Y
-    rows = _coarse_rows(geo, near, Y, C, clearance)
+    near = [_near_pairs(geo, c, margin) for c in st.C]
+    rows = _coarse_rows(geo, near, st, clearance)
     best, contact = np.inf, []
     while rows.size:
-        ia, ib, p, q = rows.T
-        wa, wb = np.asarray(omegas)[ia], np.asarray(omegas)[ib]
-        keep = wa < best
-        rows, ia, ib, p, q, wa, wb = (x[keep] for x in (rows, ia, ib, p, q, wa, wb))
+        omegas = np.asarray(st.omegas)
+        rows = rows[omegas[rows[:, 0]] < best]
         if not rows.size:
             break
-        da, db, m = _step_bounds(geo, S, ia, ib, p, q)
-        m *= SAFETY
-        near = (da + db - m) / 2 <= clearance
-        both = np.concatenate([ia[near], ib[near]])
-        d = _exact(geo, S, both, np.tile(p[near], 2), np.tile(q[near], 2))
-        da[near], db[near] = d[:near.sum()], d[near.sum():]
+        ia, ib, p, q = rows.T
+        wa, wb, n = omegas[ia], omegas[ib], len(rows)
+        m = SAFETY * _motion(st, ia, ib, p, q)
+        d = _per_state(_lower_bound, st, np.concatenate([ia, ib]), np.tile(p, 2),
+                       np.tile(q, 2))
+        da, db = d[:n], d[n:]
+        exact = (da + db - m) / 2 <= clearance
+        k = int(exact.sum())
+        d = _per_state(_distance, st, np.concatenate([ia[exact], ib[exact]]),
+                       np.tile(p[exact], 2), np.tile(q[exact], 2))
+        da[exact], db[exact] = d[:k], d[k:]
         for w_s, d_s in ((wa, da), (wb, db)):
-            hit = d_s <= clearance
+            hit = exact & (d_s <= clearance)
             if hit.any() and w_s[hit].min() <= best:
                 w_hit = w_s[hit].min()
                 at = hit & (w_s == w_hit)
@@ -314,62 +331,125 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
                 contact = sorted(set(new + (contact if w_hit == best else [])))
                 best = w_hit
         open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
-        rows, S = _split(geo, rows[open_], omegas, S, sign)
+        rows = _split(rows[open_], st)
     if not np.isfinite(best):
         return None, []
     return sign * float(best) if best > 0 else 0.0, contact
 
 
-def _step_bounds(geo: _Geometry, S, ia, ib, p, q) -> tuple[np.ndarray, ...]:
-    """Sphere lower bounds on the panel distances at states S[ia] and S[ib], and the
-    bound m (n,) on their relative vertex displacement between the two: the centres'
-    relative displacement plus each panel's largest vertex displacement about its centre."""
-    cp, cq = geo.corners[p], geo.corners[q]
-    Pa, Pb, Qa, Qb = S[ia[:, None], cp], S[ib[:, None], cp], S[ia[:, None], cq], S[ib[:, None], cq]
-    ca_p, cb_p, ca_q, cb_q = (X.mean(axis=1) for X in (Pa, Pb, Qa, Qb))
-    radii = geo.radius[p] + geo.radius[q]
-    lb_a = np.maximum(_norm(ca_p - ca_q) - radii, _plane_gap(Pa, Qa))
-    lb_b = np.maximum(_norm(cb_p - cb_q) - radii, _plane_gap(Pb, Qb))
-    up, uq = cb_p - ca_p, cb_q - ca_q
-    m = (_norm(up - uq) + _norm(Pb - Pa - up[:, None]).max(axis=1)
-         + _norm(Qb - Qa - uq[:, None]).max(axis=1))
-    return lb_a, lb_b, m
+class _States:
+    """The folded states visited along the motion, grown as steps are halved.
+
+    ``omegas``: their |omega| (a list, K entries); ``Q`` (K, P, 4, 3): every panel's
+    corners a, b, c, d; ``C`` (K, P, 3): the panels' centroids; ``n`` (K, P, 3): their
+    unit normals.
+    """
+
+    def __init__(self, geo: _Geometry, sign: float, omegas: np.ndarray):
+        P = geo.N * geo.M
+        self.geo, self.sign, self.omegas = geo, sign, []
+        self.Q, self.C, self.n = np.zeros((0, P, 4, 3)), np.zeros((0, P, 3)), np.zeros((0, P, 3))
+        self.add(omegas)
+
+    def add(self, omegas: np.ndarray) -> None:
+        """Fold the pattern at the |omega| values (k,) and append those states."""
+        omegas = np.asarray(omegas, dtype=float)
+        Q = self.geo.states(self.sign * omegas)[:, self.geo.corners]
+        n = _cross(Q[:, :, 3] - Q[:, :, 0], Q[:, :, 2] - Q[:, :, 1])
+        self.omegas.extend(omegas.tolist())
+        self.Q = np.concatenate([self.Q, Q])
+        self.C = np.concatenate([self.C, _centroid(Q)])
+        self.n = np.concatenate([self.n, n / _norm(n)[..., None]])
 
 
-def _plane_gap(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """Lower bounds (n,) on the distance of planar panels P, Q (n, 4, 3): how far one lies
-    wholly on one side of the other's plane (0 where neither does)."""
-    gap = np.zeros(len(P))
-    for A, B in ((P, Q), (Q, P)):
-        n = np.cross(A[:, 3] - A[:, 0], A[:, 2] - A[:, 1])
-        n /= _norm(n)[:, None]
-        h = np.sum((B - A[:, :1]) * n[:, None], axis=2)             # (n, 4)
-        gap = np.maximum(gap, np.maximum(h.min(axis=1), -h.max(axis=1)))
-    return gap
+def _motion(st: _States, ia, ib, p, q) -> np.ndarray:
+    """The largest displacement (n,) of a vertex of panel q relative to a vertex of panel
+    p from state ia to state ib (all (n,)), over the 16 vertex pairs."""
+    dP = st.Q[ib, p] - st.Q[ia, p]                                  # (n, 4, 3)
+    dQ = st.Q[ib, q] - st.Q[ia, q]
+    return _most(_norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+
+
+def _lower_bound(st: _States, s, p, q) -> np.ndarray:
+    """Cheap lower bounds (n,) on the distances of panels p and q in states s (all (n,)):
+    the larger of the bounding spheres' gap and the plane gap (how far one panel lies
+    wholly on one side of the other's plane)."""
+    P, Q = st.Q[s, p], st.Q[s, q]                                   # (n, 4, 3)
+    lb = _norm(st.C[s, p] - st.C[s, q]) - st.geo.radius[p] - st.geo.radius[q]
+    for A, B, nA in ((P, Q, st.n[s, p]), (Q, P, st.n[s, q])):
+        h = _dot(B - A[:, :1], nA[:, None])                         # (n, 4)
+        lb = np.maximum(lb, np.maximum(_least(h), -_most(h)))
+    return lb
+
+
+def _distance(st: _States, s, p, q) -> np.ndarray:
+    """Exact distances (n,) of panels p and q in states s (all (n,))."""
+    return _quad_distance(st.Q[s, p], st.Q[s, q], st.geo.scale)
+
+
+def _per_state(f, st: _States, s, p, q) -> np.ndarray:
+    """f(st, s, p, q) (n,) computed once for each distinct (state, pair) among the n."""
+    P = st.geo.N * st.geo.M
+    first, inv = _distinct((s * P + p) * P + q)
+    return f(st, s[first], p[first], q[first])[inv]
+
+
+def _distinct(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (u,) of one occurrence of each distinct value of ``code`` (n,) and the
+    index (n,) of every entry's value among them (by sorting)."""
+    order = np.argsort(code, kind="stable")
+    c = code[order]
+    new = np.ones(len(c), dtype=bool)
+    new[1:] = c[1:] != c[:-1]
+    inv = np.empty(len(c), dtype=np.int64)
+    inv[order] = np.cumsum(new) - 1
+    return order[new], inv
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (length 3), broadcast; written out by component
+    (NumPy's reductions over a short last axis are several times slower)."""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Cross products over the last axis (length 3), broadcast."""
+    u0, u1, u2, v0, v1, v2 = u[..., 0], u[..., 1], u[..., 2], v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], axis=-1)
 
 
 def _norm(v: np.ndarray) -> np.ndarray:
-    """Euclidean norms over the last axis."""
-    return np.sqrt(np.sum(v * v, axis=-1))
+    """Euclidean norms over the last axis (length 3)."""
+    return np.sqrt(_dot(v, v))
 
 
-def _exact(geo: _Geometry, S, s, p, q) -> np.ndarray:
-    """Panel distances (n,) in states S[s], each distinct (state, pair) computed once."""
-    code = (s * geo.N * geo.M + p) * geo.N * geo.M + q
-    uniq, inv = np.unique(code, return_inverse=True)
-    first = np.zeros(len(uniq), dtype=np.int64)
-    first[inv.ravel()] = np.arange(len(code))
-    return panel_distance(geo, S, s[first], p[first], q[first])[inv.ravel()]
+def _least(x: np.ndarray) -> np.ndarray:
+    """Minimum over the (short) last axis, elementwise over its entries."""
+    out = x[..., 0]
+    for k in range(1, x.shape[-1]):
+        out = np.minimum(out, x[..., k])
+    return out
 
 
-def _coarse_rows(geo: _Geometry, near: list[np.ndarray], Y: np.ndarray, C: np.ndarray,
+def _most(x: np.ndarray) -> np.ndarray:
+    """Maximum over the (short) last axis, elementwise over its entries."""
+    out = x[..., 0]
+    for k in range(1, x.shape[-1]):
+        out = np.maximum(out, x[..., k])
+    return out
+
+
+def _coarse_rows(geo: _Geometry, near: list[np.ndarray], st: _States,
                  clearance: float) -> np.ndarray:
     """Rows (n, 4) = (state a, state b, p, q): the candidate pairs of every coarse step
-    that the sphere bounds do not certify clear (see :func:`_step_bounds`), from the coarse
-    states Y (K, V, 3) and their panel centres C (K, P, 3)."""
+    (the K coarse states are the first K of ``st``) that the sphere bounds do not certify
+    clear; the motion bound here, the centres' relative displacement plus each panel's
+    largest vertex displacement about its centre, is at least :func:`_motion`'s."""
     P = geo.N * geo.M
+    K = len(near)
+    C = st.C[:K]
     dC = C[1:] - C[:-1]                                              # (K-1, P, 3)
-    spin = _norm(Y[1:, geo.corners] - Y[:-1, geo.corners] - dC[:, :, None]).max(axis=2)
+    spin = _most(_norm(st.Q[1:K] - st.Q[:K - 1] - dC[:, :, None]))  # (K-1, P)
     out = []
     for k in range(len(near) - 1):
         code = np.sort(np.concatenate([near[k][:, 0] * P + near[k][:, 1],
@@ -386,23 +466,18 @@ def _coarse_rows(geo: _Geometry, near: list[np.ndarray], Y: np.ndarray, C: np.nd
     return np.concatenate(out) if out else np.zeros((0, 4), dtype=np.int64)
 
 
-def _split(geo: _Geometry, rows: np.ndarray, omegas: list, S: np.ndarray,
-           sign: float) -> tuple[np.ndarray, np.ndarray]:
-    """Halve the steps of ``rows``: the child rows and the states S (K, V, 3) with the
-    midpoint states appended (their omegas appended to ``omegas``)."""
+def _split(rows: np.ndarray, st: _States) -> np.ndarray:
+    """Halve the steps of ``rows`` (n, 4): the child rows (2n, 4), the midpoint states
+    appended to ``st``."""
     if not rows.size:
-        return rows, S
-    steps, inv = np.unique(rows[:, :2], axis=0, return_inverse=True)
-    inv = inv.ravel()
-    w = np.asarray(omegas)
-    mids = (w[steps[:, 0]] + w[steps[:, 1]]) / 2
-    first = len(omegas)
-    omegas.extend(mids.tolist())
-    S = np.concatenate([S, geo.states(sign * mids)])
-    mid = first + inv
+        return rows
+    first, inv = _distinct(rows[:, 0] * len(st.omegas) + rows[:, 1])
+    w = np.asarray(st.omegas)
+    mid = len(st.omegas) + inv
+    st.add((w[rows[first, 0]] + w[rows[first, 1]]) / 2)
     left = np.stack([rows[:, 0], mid, rows[:, 2], rows[:, 3]], axis=1)
     right = np.stack([mid, rows[:, 1], rows[:, 2], rows[:, 3]], axis=1)
-    return np.concatenate([left, right]), S
+    return np.concatenate([left, right])
 
 
 def near_pairs(pattern: Pattern, Y: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
