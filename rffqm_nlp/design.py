@@ -24,8 +24,9 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-from . import numpy_model, reduced, shape, surfaces, transcription
+from . import clearance, numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
+from .collisions import collisions
 from .curvature import curvature_maps
 from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
@@ -72,6 +73,7 @@ DESIGN_KEYS = {
     "min_angle": Key("number", low=0.0, high=PI / 4, high_open=True),
     "mu_margin": Key("number", low=0.0, high=1.0, high_open=True),
     "min_length": Key("number", low=0.0),
+    "min_clearance": Key("number", low=0.0),
     "omega_bounds": Key("list", length=2, item=Key("number", low=-PI, high=PI),
                         hint="([low, high])"),
     "fix": Key("list", item=Key("choice", choices=GROUPS)),
@@ -239,6 +241,10 @@ class DesignProblem:
       at least this large (:func:`rffqm_nlp.vertex.mv_multiplier`): the MV pattern of the
       Miura is held at every crease;
     * ``min_length``: every side >= min_length times the mean side (replaces the LP);
+    * ``min_clearance``: a sheet thickness, in the target's length units: panels that share
+      no vertex stay at least this far apart in the designed state (0: not asked; see
+      :mod:`rffqm_nlp.clearance`). Whether the motion up to the designed state is free of
+      self-contact is reported in ``result.fit.collision_free`` either way;
     * ``omega_bounds``: bounds of the fold parameter;
     * ``fix``: groups held at their start, among "angles", "lengths", "omega";
     * ``weights``: loss weights, "forms" (the paper's fundamental-form loss) and "position"
@@ -259,6 +265,7 @@ class DesignProblem:
     min_angle: float = 0.15
     mu_margin: float = 0.02
     min_length: float = 0.2
+    min_clearance: float = 0.0
     omega_bounds: tuple[float, float] = (0.05, PI - 0.05)
     fix: tuple[str, ...] = ()
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
@@ -383,7 +390,49 @@ class DesignProblem:
         stats = record.stats(options, outcome)
         if not outcome.success:
             _raise_failure(nlp, outcome, stats, record.iterations)
+        if self.min_clearance > 0:
+            nlp, outcome = self._keep_clearance(nlp, start, options, record, outcome)
+            stats = record.stats(options, outcome)
         return self._result(nlp, start, outcome.x, stats, options)
+
+    def _keep_clearance(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
+                        record: "_Record", outcome: "_Outcome"
+                        ) -> tuple[transcription.NLP, "_Outcome"]:
+        """Re-solve, warm-started, with clearance rows on the pairs of panels closer than
+        about min_clearance (:mod:`rffqm_nlp.clearance`), refreshed each round, until the
+        re-marched design keeps min_clearance. Raises SolverFailed (status
+        "clearance_not_met") when a round fails or brings the closest pair no farther."""
+        pairs = np.zeros((0, 2), dtype=np.int64)
+        reached, stage_nlp = -np.inf, nlp
+        for _ in range(clearance.ROUNDS):
+            state = _marched(nlp, start, outcome.x, 2 * self.N, 2 * self.M)
+            if state is None:
+                break
+            near, worst = clearance.closest(*state, self.min_clearance)
+            if worst.distance >= self.min_clearance:
+                return stage_nlp, outcome
+            if worst.distance <= reached:
+                break
+            reached = worst.distance
+            pairs = np.unique(np.concatenate([pairs, near]), axis=0)
+            stage_nlp = clearance.constrain(nlp, *state, pairs, self.min_clearance)
+            limited = replace(options, max_iter=min(
+                options.max_iter, record.iterations + clearance.ROUND_ITERATIONS))
+            trial = self._solve_stage(stage_nlp, start, limited, record, outcome.x, warm=True)
+            if not trial.success:
+                break
+            outcome = trial
+        state = _marched(nlp, start, outcome.x, 2 * self.N, 2 * self.M)
+        worst = (clearance.closest(*state, self.min_clearance)[1] if state is not None
+                 else clearance.Closest(None, float("nan")))
+        where = ("" if worst.pair is None else
+                 f": in the last design solved, panels {worst.pair[0]} and {worst.pair[1]} "
+                 f"are {worst.distance:.4g} apart")
+        raise SolverFailed(
+            f"min_clearance = {self.min_clearance:g} is not met at the designed state{where}; "
+            "lower min_clearance, or lower omega_bounds[1] (a design folded less keeps its "
+            "layers farther apart)", status="clearance_not_met",
+            stats=record.stats(options, outcome), last_iterate=outcome.x)
 
     def _check_reachable(self) -> None:
         if self.min_length >= 1:
@@ -544,8 +593,10 @@ class DesignProblem:
                   min_side_over_mean=float(pattern.side_lengths.min()
                                            / pattern.side_lengths.mean()),
                   min_sector_angle=float(pattern.sector_angles.min()))
-        _require_finite({"the folded state": folded, "the fit": list(fit.to_dict().values())},
+        _require_finite({"the folded state": folded,
+                         "the fit": [v for v in fit.to_dict().values() if v is not None]},
                         stats, x)
+        fit = replace(fit, **collision_fields(pattern, omega))
         problem = self.config(options)
         grid = (None if surfaces.rebuildable(problem["target"])
                 else self.target.sample(TARGET_GRID, TARGET_GRID))
@@ -723,6 +774,25 @@ def _gigabytes(size: float) -> str:
         return f"{gb:.2g}"
     mantissa, exponent = f"{gb:.1e}".split("e")
     return f"{mantissa}e{int(exponent)}"
+
+
+def collision_fields(pattern, omega: float) -> dict[str, Any]:
+    """Fit's ``collision_free`` and ``first_contact_omega`` of ``pattern`` folding from 0 to
+    ``omega`` (:func:`rffqm_nlp.collisions.collisions`)."""
+    report = collisions(pattern, omega)
+    return {"collision_free": report.free, "first_contact_omega": report.first_omega}
+
+
+def _marched(nlp: transcription.NLP, start: Start, x: np.ndarray, rows: int,
+             cols: int) -> tuple[Any, float] | None:
+    """The pattern and omega of x's boundary data re-marched with the NumPy model, or None
+    when they do not march."""
+    vec, omega = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
+    try:
+        bd = BoundaryData.from_vector(vec, start.boundary.sigma, rows, cols)
+        return numpy_model.march(bd), float(omega[0])
+    except (InputError, MarchingError):
+        return None
 
 
 def design_fit(folded: np.ndarray, target_points: np.ndarray,

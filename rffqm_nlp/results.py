@@ -43,7 +43,12 @@ class Fit:
     * ``plane_rms``: RMS distance of the target lattice to its best-fitting plane (the fit a
       flat sheet reaches, for comparison);
     * ``min_side_over_mean``: the smallest side length over the mean side length;
-    * ``min_sector_angle``: the smallest sector angle (radians).
+    * ``min_sector_angle``: the smallest sector angle (radians);
+    * ``collision_free``: whether the motion from omega = 0 to the designed omega is free
+      of self-contact: no flat overlap and no two panels that share no vertex touching
+      (:func:`rffqm_nlp.collisions.collisions`); ``first_contact_omega``: the omega of the
+      first contact, or None (not relative: radians). Both None in a result saved before
+      the check.
 
     The three shape fits added with meshes as targets are None in a result saved before
     them (not measured).
@@ -55,25 +60,39 @@ class Fit:
     plane_rms: float
     min_side_over_mean: float
     min_sector_angle: float
+    collision_free: bool | None = None
+    first_contact_omega: float | None = None
     rms_surface_vertices: float | None = None
     hausdorff_vertices: float | None = None
     coverage: float | None = None
 
     def to_dict(self) -> dict[str, float | None]:
         """{field: value}, JSON-ready (None for a shape fit not measured)."""
-        return {f.name: None if getattr(self, f.name) is None else float(getattr(self, f.name))
-                for f in fields(self)}
+        return {f.name: _fit_value(f.name, getattr(self, f.name)) for f in fields(self)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Fit":
         """Inverse of :meth:`to_dict`; every field without a default must be present."""
         values = {f.name: _required(d, f.name, "fit") for f in fields(cls)
                   if f.default is MISSING or d.get(f.name) is not None}
-        return cls(**{name: float(value) for name, value in values.items()})
+        return cls(**{name: _fit_value(name, value) for name, value in values.items()})
 
     def is_finite(self) -> bool:
         """Whether every measure that was measured is a finite number."""
-        return bool(np.all(np.isfinite([v for v in self.to_dict().values() if v is not None])))
+        return bool(np.all(np.isfinite([v for v in self.to_dict().values()
+                                         if v is not None and not isinstance(v, bool)])))
+
+
+def _fit_value(name: str, value: Any) -> float | bool | None:
+    """A Fit field's value as stored: None stays None, ``collision_free`` a bool (a JSON
+    true or false, else InputError), every other field a float."""
+    if value is None:
+        return None
+    if name == "collision_free":
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"fit.collision_free must be true or false, got {value!r}")
+        return bool(value)
+    return float(value)
 
 
 @dataclass(frozen=True)

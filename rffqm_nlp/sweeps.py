@@ -92,6 +92,9 @@ RANGE_KEYS = ("low", "high", "log")
 INTEGER_KEYS = ("solve.max_iter", "solve.multistart", "solve.seed")
 #: Fit measures copied from DesignResult.fit into the table: the fields of Fit.
 FIT_COLUMNS = tuple(f.name for f in dataclasses.fields(Fit))
+#: The Fit columns that hold a flag (collision_free): nullable booleans in the table, empty
+#: for a design that failed; the other Fit columns are floats.
+FLAG_COLUMNS = tuple(f.name for f in dataclasses.fields(Fit) if str(f.type).startswith("bool"))
 #: Outcome columns of every row, after id, name, case and the swept parameters.
 OUTCOME_COLUMNS = ("status", "solver_status", "reason", *FIT_COLUMNS, "iterations", "start",
                    "build_time", "solve_time", "time", "worker", "host")
@@ -719,7 +722,8 @@ def table(study: Study, designs: list[Design], rows: Mapping[str, Mapping[str, A
     for key in swept:
         frame[key] = _homogeneous(frame[key])
     for column in FIT_COLUMNS + ("build_time", "solve_time", "time"):
-        frame[column] = frame[column].astype("float64")
+        frame[column] = frame[column].astype("boolean" if column in FLAG_COLUMNS
+                                             else "float64")
     for column in ("iterations", "start"):
         frame[column] = frame[column].astype("Int64")
     return frame

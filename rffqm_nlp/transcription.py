@@ -14,7 +14,7 @@ against the mean side), so they state the same problem.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Callable
 
@@ -66,6 +66,14 @@ class NLP:
     def objective(self) -> ca.MX:
         """f(x) = 0.5 |res(x)|^2."""
         return 0.5 * ca.sumsqr(self.residuals)
+
+    def with_rows(self, rows: ca.MX, lower: np.ndarray, upper: np.ndarray) -> "NLP":
+        """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
+        appended to g (e.g. :func:`rffqm_nlp.clearance.constrain`'s); with lower < upper
+        they are inequalities, which :mod:`rffqm_nlp.reduced` linearises like the others."""
+        return replace(self, g=ca.vertcat(self.g, rows),
+                       lbg=np.concatenate([self.lbg, np.asarray(lower, dtype=float)]),
+                       ubg=np.concatenate([self.ubg, np.asarray(upper, dtype=float)]))
 
 
 def lagrangian_hessian(nlp: NLP) -> ca.Function:

@@ -115,12 +115,16 @@ def test_cluster_run_writes_one_row_and_one_folder_per_design(cluster_run, desig
     assert (frame["iterations"] > 0).all() and (frame["time"] > 0).all()
     on_disk = pd.read_parquet(out / "results.parquet")
     pd.testing.assert_frame_equal(on_disk, frame)
+    assert on_disk["collision_free"].dtype == "boolean" and on_disk["collision_free"].all()
+    assert on_disk["first_contact_omega"].isna().all()
     assert len(pd.read_csv(out / "results.csv")) == 4
     for design, (_, row) in zip(designs, frame.iterrows()):
         result = DesignResult.load(out / "designs" / design.id)
         assert result.fit.rms == row["rms"]
         assert result.problem["target"]["radius"] == row["target.radius"]
         assert sweeps.completed_row(out / "designs" / design.id, design) is not None
+        row_json = json.loads((out / "designs" / design.id / "row.json").read_text())["row"]
+        assert row_json["collision_free"] is True and row_json["first_contact_omega"] is None
     assert not [p for p in out.rglob(".*")], "temporary files left behind"
 
 
