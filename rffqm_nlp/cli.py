@@ -190,8 +190,18 @@ def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames
     from . import viz
 
     viz.render_png(folder / "render.png", result.pattern, result.omega,
-                   target=_target_for_render(result, target, trust))
+                   target=_target_for_render(result, target, trust),
+                   contacts=_contacts(result))
     viz.folding_gif(folder / "folding.gif", result.pattern, omega_end, frames=frames)
+
+
+def _contacts(result: "DesignResult"):
+    """The collision report of a design whose fit says it is not collision-free (for
+    render.png to mark the panels in contact), else None."""
+    from .collisions import collisions
+
+    return None if result.fit.collision_free is not False else collisions(result.pattern,
+                                                                          result.omega)
 
 
 def _check_frames(frames: int) -> None:
@@ -341,12 +351,91 @@ def _summary(result: "DesignResult", out: Path) -> Table:
         ("best plane RMS, for comparison (/ diameter)", f"{fit.plane_rms:.3e}"),
         ("smallest side / mean side", f"{fit.min_side_over_mean:.4g}"),
         ("smallest sector angle (rad)", f"{fit.min_sector_angle:.4g}"),
+        ("collision-free from flat to omega", _collision_text(fit)),
         ("designed omega (rad)", f"{result.omega:.6g}"),
         ("iterations", str(stats.iterations)),
         ("time (s)", f"{stats.build_time + stats.solve_time:.1f} "
                      f"(build {stats.build_time:.1f})"),
         ("status", stats.status),
         ("output", str(out))])
+
+
+def _collision_text(fit) -> str:
+    """"yes", "no: first contact at omega w" or "no: panels overlap when flat" (a Fit's
+    collision check), "not checked" for a result saved before the check."""
+    if fit.collision_free is None:
+        return "not checked"
+    if fit.collision_free:
+        return "yes"
+    if fit.first_contact_omega is None:
+        return "no: panels overlap when flat (rffqm check)"
+    return f"no: first contact at omega {fit.first_contact_omega:.4g} (rffqm check)"
+
+
+# --------------------------------------------------------------------------- check
+#: Panel pairs listed per row of the ``check`` table before "... and n more".
+CHECK_PAIRS = 8
+
+
+@app.command("check")
+def check_cmd(
+    source: Path = typer.Argument(..., help="A saved design (its folder or result.json) or "
+                                  "a FOLD file written by rffqm (.fold).", show_default=False),
+    clearance: float = typer.Option(0.0, "--clearance", help="Distance (a sheet thickness, "
+                                    "in the pattern's length units) that panels sharing no "
+                                    "vertex must keep; 0: they must not touch."),
+    omega: Optional[float] = typer.Option(None, "--omega", help="Check the motion from flat "
+                                          "to this fold parameter in [-pi, pi] (default: the "
+                                          "design's omega)."),
+) -> None:
+    """Check a design for self-contact, like a linter.
+
+    Prints the panels that overlap in the flat pattern, the first omega at which two panels
+    that share no vertex touch (or come closer than --clearance) while folding from flat
+    to omega, and the pairs in contact there (1-based (i, j) panels). Exit status 0 when
+    the motion is free, 1 when it is not, 2 on bad input.
+    """
+    from .collisions import collisions
+
+    with user_errors():
+        pattern, designed = _design_to_check(source)
+        om = designed if omega is None else float(check_omega(omega, "--omega"))
+        if not (math.isfinite(clearance) and clearance >= 0):
+            raise InputError(f"--clearance must be a finite distance >= 0, got {clearance:g}")
+        report = collisions(pattern, om, clearance=clearance)
+    Console().print(_check_table(report, source))
+    raise typer.Exit(0 if report.free else 1)
+
+
+def _design_to_check(source: Path) -> tuple:
+    """(pattern, omega) of a FOLD file (by its suffix .fold) or a saved design result."""
+    if source.suffix.lower() == ".fold":
+        from .foldfile import read_fold
+
+        pattern, omega, _ = read_fold(source)
+        return pattern, omega
+    result = _load_result(source)
+    return result.pattern, result.omega
+
+
+def _pairs_text(pairs: list) -> str:
+    """"(1, 2)-(3, 4), ..." for at most CHECK_PAIRS pairs, "none" for none."""
+    if not pairs:
+        return "none"
+    text = ", ".join(f"({a[0]}, {a[1]})-({b[0]}, {b[1]})" for a, b in pairs[:CHECK_PAIRS])
+    return text + (f" and {len(pairs) - CHECK_PAIRS} more" if len(pairs) > CHECK_PAIRS else "")
+
+
+def _check_table(report, source: Path) -> Table:
+    """The ``check`` summary of a :class:`~rffqm_nlp.collisions.CollisionReport`."""
+    first = "none" if report.first_omega is None else f"{report.first_omega:.6g}"
+    return quantity_table(f"self-contact: {source}", [
+        ("motion checked", f"omega from 0 to {report.omega_max:.6g}"),
+        ("clearance", f"{report.clearance:g}"),
+        ("panels overlapping when flat", _pairs_text(report.flat_overlaps)),
+        ("first contact at omega", first),
+        ("panel pairs in contact there", _pairs_text(report.pairs)),
+        ("collision-free", "yes" if report.free else "no")])
 
 
 # --------------------------------------------------------------------------- sweep

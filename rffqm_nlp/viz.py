@@ -209,14 +209,26 @@ def _plotter(pv, size: tuple[int, int]):
     return p
 
 
+def _mark_contacts(p, mesh, contacts, M: int) -> None:
+    """Draw the panels of ``contacts`` (a :class:`~rffqm_nlp.collisions.CollisionReport`:
+    its pairs at the first contact and its flat overlaps) red, outlined in thick red."""
+    panels = {(i - 1) * M + (j - 1) for pair in [*contacts.pairs, *contacts.flat_overlaps]
+              for i, j in pair}
+    if panels:
+        cells = mesh.extract_cells(sorted(panels))
+        p.add_mesh(cells, color="red", show_edges=True, edge_color="darkred", line_width=4)
+
+
 def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
-               size: tuple[int, int] = (800, 600)) -> Path:
+               size: tuple[int, int] = (800, 600), contacts=None) -> Path:
     """Render the folded state at ``omega`` to a PNG of ``size`` (width, height) pixels.
 
     With a ``target`` mesh (a trimesh.Trimesh in the frame of :func:`marching.fold`) the
     target is drawn coloured by its distance to the design, with the design's creases as
     lines; with target points ((n, 3), same frame) the origami is coloured by its distance
-    to them, drawn translucent; otherwise the origami is coloured by height z.
+    to them, drawn translucent; otherwise the origami is coloured by height z. With
+    ``contacts``, a :class:`~rffqm_nlp.collisions.CollisionReport` that is not free, the
+    panels in contact (at its first contact, or overlapping flat) are drawn red.
     """
     pv = _pyvista()
     import imageio.v3 as iio
@@ -232,6 +244,8 @@ def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
                            else _add_target(pv, p, mesh, target))
             p.add_mesh(mesh, scalars=title, cmap="viridis", show_edges=True,
                        edge_color="black", scalar_bar_args={"title": title, "color": "black"})
+        if contacts is not None and not contacts.free:
+            _mark_contacts(p, mesh, contacts, pat.M)
         p.view_isometric()
         p.reset_camera()
         img = p.screenshot(return_img=True)

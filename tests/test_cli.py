@@ -105,7 +105,7 @@ def test_design_writes_every_file(designed, result):
     assert names == DESIGN_FILES | (RENDER_FILES if rendering else set())
     assert leftovers(out.parent) == []
     for word in ("Hausdorff", "smallest side / mean", "smallest sector angle", "iterations",
-                 "Solve_Succeeded"):
+                 "Solve_Succeeded", "collision-free from flat to omega"):
         assert word in res.output
     if not rendering:
         assert "warning" in res.output and reason.split()[0] in res.output
@@ -315,7 +315,7 @@ def test_targets_lists_every_builtin():
 
 
 @pytest.mark.parametrize("command", [[], ["design"], ["fold"], ["export"], ["render"],
-                                     ["view"], ["targets"], ["march"]])
+                                     ["view"], ["check"], ["targets"], ["march"]])
 def test_help(command):
     res = invoke(*command, "--help")
     assert res.exit_code == 0 and "Usage" in res.output

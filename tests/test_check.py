@@ -1,0 +1,152 @@
+"""Self-contact in the design flow: the fit's collision flag, ``rffqm check`` (exit 0 free,
+1 not, 2 bad input) and DesignProblem.min_clearance (the distance it promises, or the
+status clearance_not_met)."""
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import rffqm_nlp as rq
+from rffqm_nlp import foldfile
+from rffqm_nlp import numpy_model as nm
+from rffqm_nlp.cli import app
+from rffqm_nlp.clearance import choose_axis, panel_corners
+from rffqm_nlp.collisions import triangle_distance
+from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.results import DesignResult, Fit
+
+TARGET = Path(__file__).resolve().parents[1] / "targets" / "sphere_cap.toml"
+#: A seed of the paper's Fig. Random recipe (10 x 10, angles +-0.1 pi, LP lengths) whose
+#: panels (3, 10) and (8, 8) pass through each other at omega 1.6.
+COLLIDING_SEED = 16
+
+
+def invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def problem(**changes) -> rq.DesignProblem:
+    """The bundled sphere cap at 8 x 8 panels."""
+    prob, _ = rq.load_design(TARGET)
+    return replace(prob, panels=(8, 8), **changes)
+
+
+@pytest.fixture(scope="module")
+def options() -> rq.SolveOptions:
+    return rq.load_design(TARGET)[1]
+
+
+@pytest.fixture(scope="module")
+def result(options) -> DesignResult:
+    return problem().solve(options)
+
+
+def min_distance(pattern: rq.Pattern, omega: float) -> float:
+    """Smallest distance between two panels that share no vertex at omega, by brute force
+    over every such pair and their triangles (a, c, d) and (a, d, b)."""
+    Y = nm.fold(pattern, omega).reshape(-1, 3)
+    corners = panel_corners(pattern.N, pattern.M)
+    tri = Y[corners[:, [[0, 2, 3], [0, 3, 1]]]]                     # (P, 2, 3, 3)
+    i, j = np.divmod(np.arange(pattern.N * pattern.M), pattern.M)
+    p, q = np.triu_indices(len(corners), 1)
+    far = np.maximum(np.abs(i[p] - i[q]), np.abs(j[p] - j[q])) >= 2
+    p, q = p[far], q[far]
+    A = tri[p][:, [0, 0, 1, 1]].reshape(-1, 3, 3)
+    B = tri[q][:, [0, 1, 0, 1]].reshape(-1, 3, 3)
+    return float(triangle_distance(A, B).min())
+
+
+def colliding_pattern() -> rq.Pattern:
+    bd = rq.perturb_angles(rq.miura_boundary(10, 10), 0.1 * np.pi, COLLIDING_SEED)
+    return nm.march(side_length_lp(bd))
+
+
+# --------------------------------------------------------------------------- the fit
+def test_design_is_collision_free_and_the_flag_round_trips(result, tmp_path):
+    assert result.fit.collision_free is True and result.fit.first_contact_omega is None
+    assert result.fit.is_finite()
+    path = result.save(tmp_path / "run")
+    stored = json.loads(path.read_text())["fit"]
+    assert stored["collision_free"] is True and stored["first_contact_omega"] is None
+    back = DesignResult.load(tmp_path / "run")
+    assert back.fit == result.fit and back.fit.collision_free is True
+
+
+def test_fit_flag_types_are_checked():
+    fit = Fit(rms=0.1, rms_surface=0.1, hausdorff=0.2, plane_rms=0.3, min_side_over_mean=0.5,
+              min_sector_angle=0.4, collision_free=False, first_contact_omega=0.76)
+    d = fit.to_dict()
+    assert d["collision_free"] is False and d["first_contact_omega"] == 0.76
+    assert Fit.from_dict(d) == fit and fit.is_finite()
+    with pytest.raises(rq.InputError, match="fit.collision_free must be true or false"):
+        Fit.from_dict({**d, "collision_free": 1.0})
+    older = Fit.from_dict({k: v for k, v in d.items()
+                           if k not in ("collision_free", "first_contact_omega")})
+    assert older.collision_free is None and older.first_contact_omega is None
+
+
+# --------------------------------------------------------------------------- rffqm check
+def test_check_a_free_design_exits_0(result, tmp_path):
+    result.save(tmp_path / "run")
+    res = invoke("check", tmp_path / "run")
+    assert res.exit_code == 0, res.output
+    assert "collision-free" in res.output and "none" in res.output
+
+
+def test_check_a_colliding_fold_file_exits_1_with_the_pairs(tmp_path):
+    foldfile.write_fold(tmp_path / "random.fold", colliding_pattern(), 1.7)
+    res = invoke("check", tmp_path / "random.fold")
+    assert res.exit_code == 1, res.output
+    assert "(3, 10)-(8, 8)" in res.output and "1.6" in res.output
+    early = invoke("check", tmp_path / "random.fold", "--omega", 1.2)
+    assert early.exit_code == 0, early.output
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["missing"], "no design result"),
+    (["missing.fold"], "cannot read a FOLD"),
+    (["{run}", "--clearance", "-1"], "--clearance must be a finite distance >= 0"),
+    (["{run}", "--omega", "4"], "--omega"),
+])
+def test_check_bad_input_exits_2_in_one_line(result, tmp_path, args, fragment):
+    result.save(tmp_path / "run")
+    res = invoke("check", *[a.format(run=tmp_path / "run") if a.startswith("{")
+                            else (tmp_path / a if a.startswith("missing") else a)
+                            for a in args])
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if "error" in ln.lower()]
+    assert len(errors) == 1 and fragment in errors[0], res.output
+
+
+# --------------------------------------------------------------------------- min_clearance
+def test_separating_axis_of_stacked_panels_is_their_normal():
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
+    kind, sign = choose_axis(P, P + [0.2, 0.1, 0.3])
+    assert (kind, sign) in ((0, 1.0), (1, 1.0))                  # a normal, Q above P
+
+
+def test_min_clearance_keeps_the_distance_it_promises(result, options):
+    free = min_distance(result.pattern, result.omega)
+    clearance = 1.2 * free
+    kept = problem(min_clearance=clearance).solve(options)
+    assert kept.stats.success
+    assert min_distance(kept.pattern, kept.omega) >= clearance - 1e-6
+    assert kept.problem["design"]["min_clearance"] == clearance
+
+
+def test_impossible_min_clearance_ends_clearance_not_met(result, options):
+    with pytest.raises(rq.SolverFailed, match="min_clearance = .* is not met") as info:
+        problem(min_clearance=0.6).solve(options)
+    assert info.value.status == "clearance_not_met"
+    assert "panels (" in str(info.value)
+
+
+def test_min_clearance_is_validated():
+    with pytest.raises(rq.InputError, match="min_clearance"):
+        problem(min_clearance=-0.1)
+    with pytest.raises(rq.InputError, match="min_clearance"):
+        problem(min_clearance=float("nan"))
