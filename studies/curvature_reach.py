@@ -101,10 +101,11 @@ def figure(frame: pd.DataFrame, path: Path, panels: list[int]) -> None:
 
 def markdown(frame: pd.DataFrame, header: list[str], panels: list[int]) -> str:
     """One line per target, one column per pattern size: RMS (or the status), iterations,
-    time."""
+    time; and whether each design's motion is collision-free."""
     lines = header + ["", "| target | K L^2 | best plane RMS | "
-                      + " | ".join(f"{p} x {p}: RMS, it., time" for p in panels) + " |",
-                      "|---|---|---|" + "---|" * len(panels)]
+                      + " | ".join(f"{p} x {p}: RMS, it., time" for p in panels)
+                      + f" | collision-free ({', '.join(f'{p} x {p}' for p in panels)}) |",
+                      "|---|---|---|" + "---|" * (len(panels) + 1)]
     for case, group in frame.groupby("case", sort=False):
         cells = []
         for p in panels:
@@ -115,9 +116,23 @@ def markdown(frame: pd.DataFrame, header: list[str], panels: list[int]) -> str:
             else:
                 cells.append(f"{row['status']}: {row['solver_status']} ({row['time']:.0f} s)")
         first = group.iloc[0]
+        free = ", ".join(collision_free(group[group["panels"] == p].iloc[0]) for p in panels)
         lines.append(f"| {case} | {first['K L^2']:+.2f} | {100 * first['plane']:.2f}% | "
-                     + " | ".join(cells) + " |")
+                     + " | ".join(cells) + f" | {free} |")
     return "\n".join(lines) + "\n"
+
+
+def collision_free(row: pd.Series) -> str:
+    """"yes", "no (first contact at omega w)", "-" for a design that failed, "?" for one
+    solved before the check existed (fit.collision_free)."""
+    if row["status"] != "solved":
+        return "-"
+    if pd.isna(row["collision_free"]):
+        return "?"
+    if row["collision_free"]:
+        return "yes"
+    w = row["first_contact_omega"]
+    return "no" if pd.isna(w) else f"no (omega {w:.2f})"
 
 
 def main() -> None:
@@ -152,7 +167,9 @@ def main() -> None:
               "- design: defaults (layout zigzag_i, alpha0 1.1, omega0 2.0, min_length 0.2, "
               "min_angle 0.15); IPOPT (sequential), stop_rms off, max_iter 500; RMS = distance "
               "to the target lattice / target diameter; time = wall time of the design on its "
-              "worker (build + solve)",
+              "worker (build + solve); collision-free: the motion from flat to the designed "
+              "omega has no two panels that share no vertex touching (fit.collision_free, "
+              "docs/collisions.md)",
               "- ![plot](curvature_reach.png)"]
     text = markdown(frame, header, panels)
     (args.results / "curvature_reach.md").write_text(text)
