@@ -123,9 +123,10 @@ class SolveOptions:
       on the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only):
       its variables are the boundary data, omega and the alignment, every iterate is
       re-marched, so every iterate is an admissible design, and the inequalities enter each
-      step linearised (a small QP). It stops at ``stop_rms``; when it stalls, IPOPT (with
-      ``hessian``) finishes from its point. Measured against IPOPT in
-      studies/results/default_solver.md;
+      step linearised (a small QP). It stops at ``stop_rms``, or where the reduced
+      problem's optimality conditions hold to ``tol`` (status "Solve_Succeeded"); only when
+      it stalls does IPOPT (with ``hessian``) finish from its point. Measured against IPOPT
+      in studies/results/bench_default_solve.md;
     * ``transcription``: "simultaneous" (all pattern and kinematic quantities as variables,
       the marching equations as sparse equality constraints) or "sequential" (the marching
       graph as a function of the boundary data; IPOPT only). Both state the same NLP;
@@ -142,7 +143,7 @@ class SolveOptions:
       warm-started from the last (e.g. (10, 1): first stay close to the Miura, then let the
       fit improve; the default is one solve);
     * ``max_iter``, ``tol``, ``time_limit`` (seconds): the limits, over all solvers and
-      stages (``tol``: IPOPT's);
+      stages (``tol``: IPOPT's, and that of Levenberg-Marquardt's optimality error);
     * ``stop_rms``: stop as soon as the aligned coarse lattice is within this RMS distance
       of the target lattice (a fraction of the target's diameter) with every constraint
       holding (status "Fit_Reached"); None runs to the solver's tolerance. With the
@@ -463,9 +464,13 @@ class DesignProblem:
         """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x,
         every step recorded; None when x is not an admissible start (no step taken)."""
         deadline = None if options.time_limit is None else record.t0 + options.time_limit
+        t1 = time.perf_counter()
+        manifold = reduced.Manifold(nlp)  # its derivatives' build, like IPOPT's
+        record.build_time += time.perf_counter() - t1
         out = reduced.levenberg_marquardt(
             nlp, x, options.damping, options.max_iter - record.iterations, deadline=deadline,
-            stop=self._fit_reached(nlp, start, options), callback=record.log)
+            stop=self._fit_reached(nlp, start, options), callback=record.log,
+            tol=options.tol, manifold=manifold)
         if out.status == "Inadmissible_Start":
             return None
         record.iterations += out.iterations
@@ -473,7 +478,7 @@ class DesignProblem:
         status = out.status
         if status == "Stalled" and record.iterations >= options.max_iter:
             status = "Maximum_Iterations_Exceeded"
-        return _Outcome(x=out.x, status=status, success=status == "Fit_Reached",
+        return _Outcome(x=out.x, status=status, success=out.success,
                         objective=out.objective, best=out.x)
 
     def _solve_ipopt(self, nlp: transcription.NLP, start: Start, options: SolveOptions,

@@ -1,4 +1,4 @@
-"""Levenberg-Marquardt on the marching manifold (``SolveOptions(solver="levenberg-marquardt")``).
+"""Levenberg-Marquardt on the marching manifold (``solver="levenberg-marquardt"``).
 
 The simultaneous NLP (:func:`rffqm_nlp.transcription.simultaneous`) states the marching
 equations c(x) = 0 as constraints, and IPOPT's iterates meet them only near the optimum.
@@ -8,17 +8,19 @@ by the march (the NumPy model, :attr:`NLP.project`). The loss is then a least-sq
 function of d alone, f(d) = 0.5 |r(d, s(d))|^2, and its Gauss-Newton model is exact to
 first order: no constraint curvature is dropped.
 
-Derivatives come from the simultaneous NLP's sparse Jacobians. The marching equations are
-explicit (each computes one new quantity from earlier ones), so their Jacobian in s is
-triangular after a permutation, found once from its sparsity (a matching of equations to
-unknowns and a topological order), and the state's sensitivity S = -C_s^{-1} C_d costs a
-sparse triangular solve per design variable. The reduced residuals have the Jacobian
-J_d + J_s S, the inequalities (sector angles, multiplier margins, boundary MV assignment,
-sides against the mean side, bounds) the rows G_d + G_s S.
+Derivatives come from the simultaneous NLP's sparse Jacobians, evaluated once per accepted
+point into preallocated buffers (trial points evaluate only r and g). The marching
+equations are explicit (each computes one new quantity from earlier ones), so their
+Jacobian in s is triangular after a permutation, found once from its sparsity (a matching
+of equations to unknowns, then the longest chain of dependencies of each equation, its
+level). The state's sensitivity S = -C_s^{-1} C_d is then one sparse product per level:
+the unknowns of a level depend only on those of earlier levels. The reduced residuals have
+the Jacobian J_d + J_s S, the inequalities (sector angles, multiplier margins, boundary MV
+assignment, sides against the mean side, bounds) the rows G_d + G_s S.
 
 Each iteration solves the damped, linearised problem
 
-    min_dd 0.5 |r + J dd|^2 + 0.5 lam dd' M dd   s.t. the inequalities, linearised,
+    min_dd 0.5 |r + J dd|^2 + 0.5 dd' B dd + 0.5 lam dd' M dd   s.t. the inequalities, linearised,
 
 as a small dense QP (DAQP; only the rows the unconstrained step would break, and their
 neighbours in slack, enter it), re-marches d + dd and accepts it if the loss falls and every
@@ -28,22 +30,32 @@ Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least square
 problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D_d plus
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
-lattice point); this metric took fewer iterations than the whole state or a diagonal
-(docs/solvers.md).
+lattice point). B estimates the part of the Hessian that Gauss-Newton drops, sum r_i
+Hess r_i (and the active inequalities' curvature), by the structured secant update of
+Dennis, Gay & Welsch ("An adaptive nonlinear least-squares algorithm", ACM TOMS 7, 1981;
+NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each accepted
+step; a step uses it when it predicted the last step's reduction better than J' J alone
+did (NL2SOL's choice), and when J' J + B + lam M is positive definite. Where the residuals
+do not vanish at the optimum Gauss-Newton converges only linearly; B speeds up the end.
+
+The run stops with status "Solve_Succeeded" when the first-order optimality conditions of
+the reduced problem hold at a marched iterate (:func:`_kkt_error`): the gradient J' r
+less the linearised active inequalities' multipliers (those of the step's QP, of the right
+sign, zero where the inequality is not active) is at most ``tol`` in the max norm, relative
+to max(1, |J' r at the start| / 100) as IPOPT's gradient-based scaling of the objective.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from graphlib import TopologicalSorter
 from typing import Callable
 
 import casadi as ca
 import numpy as np
+import scipy.linalg as la
 import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_bipartite_matching
-from scipy.sparse.linalg import splu
 
 from .errors import InputError
 from .transcription import NLP
@@ -54,52 +66,132 @@ FEASIBLE = 1e-9
 CORRECTIONS = 3
 #: damping above which no step is found: the run stops with status "Stalled"
 MAX_DAMPING = 1e10
-#: an accepted step that lowers the loss by less than this fraction ends the run
-#: ("Stalled"): from there, IPOPT's Newton steps converge faster
-MIN_DECREASE = 1e-4
 #: rows of S per block of the metric's product
 ROWS = 65536
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
-#: design columns per triangular solve (SuperLU solves a few right-hand sides at a time
-#: fastest, docs/solvers.md)
-BLOCK = 16
+#: statuses of a run that ended where it should
+SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
 
 @dataclass
 class Outcome:
     """Where a run ended: ``x`` (a marched design, admissible), its loss, the number of
-    accepted steps and the status: "Fit_Reached" (``stop`` held), "Stalled" (no step
-    lowers the loss enough), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded",
-    or "Inadmissible_Start" (the start, re-marched, breaks a constraint or does not march:
-    no step was taken, ``x`` is the start as given and ``objective`` None)."""
+    accepted steps, the status and the optimality error (:func:`_kkt_error`, scaled) at
+    the last point tested (None when none was). Statuses: "Solve_Succeeded" (first-order
+    optimal to ``tol``), "Fit_Reached" (``stop`` held), "Stalled" (no step lowers the
+    loss), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
+    "Inadmissible_Start" (the start, re-marched, breaks a constraint or does not march: no
+    step was taken, ``x`` is the start as given and ``objective`` None)."""
 
     x: np.ndarray
     objective: float | None
     iterations: int
     status: str
+    kkt_error: float | None = None
+
+    @property
+    def success(self) -> bool:
+        """Optimal to tol, or the fit asked for reached."""
+        return self.status in SUCCESS
 
 
 @dataclass
 class _Point:
-    """A marched design and the linearisation of the reduced problem there."""
+    """A marched design x (n,), its residuals r (n_r,) and constraints g (n_g,)."""
 
     x: np.ndarray
     r: np.ndarray
     g: np.ndarray
-    J: sp.csc_matrix
-    G: sp.csr_matrix
 
     @property
     def objective(self) -> float:
         return 0.5 * float(self.r @ self.r)
 
 
+@dataclass
+class _Linearization:
+    """The Jacobians of r and g at a point, split by design (n_d) and state (n_s) columns:
+    J_design (n_r, n_d) dense, J_state (n_r, n_s), the inequality rows' G_design and
+    G_state (n_i, .), and the sensitivity S (n_s, n_d)."""
+
+    J_design: np.ndarray
+    J_state: sp.csr_matrix
+    G_design: sp.csr_matrix
+    G_state: sp.csr_matrix
+    S: np.ndarray
+
+
+class _Buffered:
+    """A CasADi Function of x evaluated into preallocated NumPy arrays (its nonzeros)."""
+
+    def __init__(self, function: ca.Function):
+        self.function = function
+        self._buffer, self._eval = function.buffer()
+        self._x = np.zeros(function.nnz_in(0))
+        self._buffer.set_arg(0, memoryview(self._x))
+        self.out = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+        for i, out in enumerate(self.out):
+            self._buffer.set_res(i, memoryview(out))
+
+    def __call__(self, x: np.ndarray) -> list[np.ndarray]:
+        self._x[:] = x
+        self._eval()
+        return [out.copy() for out in self.out]
+
+    def pattern(self, i: int) -> sp.csc_matrix:
+        """Output i's sparsity with data = 1 + the index of each nonzero."""
+        s = self.function.sparsity_out(i)
+        colind, row = s.get_ccs()
+        return sp.csc_matrix((np.arange(1, s.nnz() + 1, dtype=float), row, colind),
+                             shape=s.shape)
+
+
+class _Sliced:
+    """A fixed submatrix of a sparse Jacobian, refilled from the Jacobian's nonzeros."""
+
+    def __init__(self, block: sp.spmatrix, fmt: str = "csr"):
+        self.matrix = block.asformat(fmt, copy=True)
+        self.matrix.sort_indices()
+        self._index = self.matrix.data.astype(np.int64) - 1
+
+    def __call__(self, nonzeros: np.ndarray) -> sp.spmatrix:
+        m = self.matrix.copy()
+        m.data = nonzeros[self._index]
+        return m
+
+
+class _LevelBlock:
+    """The marching equations of one level: ``rows`` (n_k,) and their ``unknowns``, with
+    C_s off the own unknowns (``off``, n_k x n_s, refilled in place) and C_d (n_k x n_d),
+    given as patterns with data = 1 + the index of each nonzero in G's."""
+
+    def __init__(self, rows: np.ndarray, unknowns: np.ndarray, off: sp.csr_matrix,
+                 Cd: sp.csr_matrix):
+        self.rows, self.unknowns = rows, unknowns
+        self._off = off.copy()
+        self._off_index = off.data.astype(np.int64) - 1
+        Cd = Cd.tocoo()
+        self._cd = (Cd.row, Cd.col, Cd.data.astype(np.int64) - 1)
+        self._shape = (rows.size, Cd.shape[1])
+
+    def right_side(self, G: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """C_d + C_s,off S over the block's rows (n_k, n_d), S holding earlier levels."""
+        out = np.zeros(self._shape)
+        row, col, index = self._cd
+        out[row, col] = G[index]
+        if self._off.nnz:
+            self._off.data[:] = G[self._off_index]
+            out += self._off @ S
+        return out
+
+
 class Manifold:
     """The simultaneous NLP split into its design and its marched state.
 
-    Built once per NLP: the index sets, the triangular order of the marching equations and
-    the CasADi Function of the residuals, the constraints and their Jacobians.
+    Built once per NLP: the index sets, the levels of the marching equations, and the
+    CasADi Functions of the residuals and constraints (trial points) and of their
+    Jacobians (accepted points).
     """
 
     def __init__(self, nlp: NLP):
@@ -118,9 +210,10 @@ class Manifold:
         if self.eq.size != self.state.size:
             raise RuntimeError(f"{self.eq.size} marching equations for {self.state.size} "
                                "state variables")
-        self._functions = ca.Function(
-            "linearization", [nlp.x],
-            [nlp.residuals, ca.jacobian(nlp.residuals, nlp.x), nlp.g, ca.jacobian(nlp.g, nlp.x)])
+        self._values = _Buffered(ca.Function("values", [nlp.x], [nlp.residuals, nlp.g]))
+        self._jacobians = _Buffered(ca.Function(
+            "jacobians", [nlp.x],
+            [ca.jacobian(nlp.residuals, nlp.x), ca.jacobian(nlp.g, nlp.x)]))
         where = np.full(n, -1)
         where[self.state] = np.arange(self.state.size)
         pattern = np.zeros(n, dtype=bool)
@@ -134,16 +227,85 @@ class Manifold:
         self.bounded_state = np.flatnonzero(bounded[self.state])
         self.lower = self.inequalities(nlp.lbg, nlp.lbx)
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
-        self._order: tuple[np.ndarray, np.ndarray] | None = None
+        self._slice_jacobians()
 
-    # ---------------------------------------------------------------- linearisation
+    def _slice_jacobians(self) -> None:
+        """The fixed blocks of J and G, the matching of marching equations to state
+        unknowns and their levels (:meth:`_levels`)."""
+        J = self._jacobians.pattern(0)
+        G = self._jacobians.pattern(1).tocsr()
+        self._J_design = _Sliced(J[:, self.design], "csc")
+        self._J_state = _Sliced(J[:, self.state].tocsr())
+        Gin = G[self.ineq]
+        self._G_design = _Sliced(Gin[:, self.design])
+        self._G_state = _Sliced(Gin[:, self.state])
+        Geq = G[self.eq]
+        Cs, Cd = Geq[:, self.state].tocsr(), Geq[:, self.design].tocsr()
+        match = maximum_bipartite_matching(Cs, perm_type="column")
+        if np.any(match < 0):
+            raise RuntimeError("the marching equations are structurally singular in the state")
+        self.match = match  # the unknown (state index) of each marching equation
+        Cs = Cs.tocoo()
+        own = Cs.col == match[Cs.row]
+        diagonal = np.empty(Cs.shape[0], dtype=np.int64)
+        diagonal[Cs.row[own]] = Cs.data[own].astype(np.int64) - 1
+        self._diagonal = diagonal
+        off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
+        level = self._levels(off)
+        self.levels = [np.flatnonzero(level == k) for k in range(level.max() + 1)]
+        self._blocks = [_LevelBlock(rows, match[rows], off[rows], Cd[rows])
+                        for rows in self.levels]
+
+    def _levels(self, off: sp.csr_matrix) -> np.ndarray:
+        """The level of each marching equation (n_eq,): 0 for one that uses no other
+        equation's unknown, else one more than the highest level among those it uses.
+        ``off``: the equations x state Jacobian pattern without each equation's own unknown."""
+        owner = np.empty(off.shape[1], dtype=np.int64)
+        owner[self.match] = np.arange(off.shape[0])
+        deps = sp.csr_matrix((np.ones(off.nnz), owner[off.indices], off.indptr),
+                             shape=(off.shape[0], off.shape[0]))
+        starts, has = deps.indptr[:-1], np.diff(deps.indptr) > 0
+        level = np.zeros(off.shape[0], dtype=np.int64)
+        for _ in range(off.shape[0] + 1):
+            new = np.zeros_like(level)
+            if deps.nnz:
+                new[has] = np.maximum.reduceat(level[deps.indices] + 1, starts[has])
+            if np.array_equal(new, level):
+                return level
+            level = new
+        raise RuntimeError("the marching equations are cyclic in the state")
+
+    # ---------------------------------------------------------------- evaluation
     def point(self, x: np.ndarray) -> _Point | None:
-        """The NLP's functions at a marched x; None where they are not finite."""
-        r, J, g, G = self._functions(x)
-        r, g = r.full().ravel(), g.full().ravel()
+        """r and g at a marched x; None where they are not finite."""
+        r, g = self._values(x)
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(g))):
             return None
-        return _Point(x=x, r=r, g=g, J=J.sparse().tocsc(), G=G.sparse().tocsr())
+        return _Point(x=x, r=r, g=g)
+
+    def linearize(self, p: _Point) -> _Linearization | None:
+        """The Jacobians and the sensitivity at p; None where they are not finite or the
+        marching equations no longer determine their unknowns."""
+        J, G = self._jacobians(p.x)
+        if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
+            return None
+        S = self.sensitivity(G)
+        if S is None:
+            return None
+        return _Linearization(J_design=self._J_design(J).toarray(), J_state=self._J_state(J),
+                              G_design=self._G_design(G), G_state=self._G_state(G), S=S)
+
+    def sensitivity(self, G: np.ndarray) -> np.ndarray | None:
+        """S = ds/dd (n_s, n_d) from C_s S = -C_d, level by level; ``G``: the nonzeros of
+        the constraints' Jacobian. None where an equation's own unknown has a zero
+        coefficient."""
+        diagonal = G[self._diagonal]
+        if np.any(diagonal == 0):
+            return None
+        S = np.zeros((self.state.size, self.design.size))
+        for block in self._blocks:
+            S[block.unknowns] = -block.right_side(G, S) / diagonal[block.rows, None]
+        return S if np.all(np.isfinite(S)) else None
 
     def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The inequality rows of the reduced problem at (g, x): g's inequality rows, then
@@ -157,76 +319,51 @@ class Manifold:
         return float(max(0.0, np.max(nlp.lbg - p.g), np.max(p.g - nlp.ubg),
                          np.max(nlp.lbx - p.x), np.max(p.x - nlp.ubx)))
 
-    def _triangular_order(self, C: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, columns) of C (marching equations x state) in an order that makes it
-        lower triangular: each equation matched to the unknown it computes, equations
-        sorted so that every one comes after those whose unknowns it uses."""
-        match = maximum_bipartite_matching(C, perm_type="column")
-        if np.any(match < 0):
-            raise RuntimeError("the marching equations are structurally singular in the state")
-        P = C[:, match].tocsr()  # the unknown of equation i in column i
-        deps = {i: set(P.indices[P.indptr[i]:P.indptr[i + 1]].tolist()) - {i}
-                for i in range(P.shape[0])}
-        rows = np.fromiter(TopologicalSorter(deps).static_order(), dtype=int,
-                           count=P.shape[0])
-        return rows, match[rows]
-
-    def sensitivity(self, p: _Point) -> np.ndarray | None:
-        """S = ds/dd (state x design, dense) at p, from C_s S = -C_d; None where C_s is
-        singular (a marching equation that no longer determines its unknown)."""
-        G = p.G[self.eq]
-        Cs, Cd = G[:, self.state].tocsr(), G[:, self.design].tocsr()
-        if self._order is None:
-            self._order = self._triangular_order(Cs)
-        rows, cols = self._order
-        try:
-            lu = splu(Cs[rows][:, cols].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0)
-        except RuntimeError:  # SuperLU: "Factor is exactly singular"
-            return None
-        Cd = Cd[rows].tocsc()
-        S = np.empty((self.state.size, self.design.size))
-        for k in range(0, self.design.size, BLOCK):
-            S[cols, k:k + BLOCK] = -lu.solve(Cd[:, k:k + BLOCK].toarray())
-        return S if np.all(np.isfinite(S)) else None
-
 
 @dataclass
 class _Model:
-    """The damped Gauss-Newton model of the reduced problem at a point, and its
-    inequalities: rows = g's inequality rows, then the bounded design, then the bounded
-    state variables, each with its current value and bounds."""
+    """The Gauss-Newton model of the reduced problem at a point: the reduced Jacobian Jr
+    (n_r, n_d), H = Jr' Jr + B and the metric M (n_d, n_d), the gradient Jr' r (n_d,),
+    and its inequalities: rows = g's inequality rows, then the bounded design, then the
+    bounded state variables, each with its bounds minus its current value."""
 
+    Jr: np.ndarray
+    JtJ: np.ndarray
     H: np.ndarray
     M: np.ndarray
     grad: np.ndarray
-    S: np.ndarray
-    G_design: sp.csr_matrix
-    G_state: sp.csr_matrix
+    lin: _Linearization
     lower: np.ndarray  # bounds minus current values: lower <= A dd <= upper
     upper: np.ndarray
 
 
-def _model(man: Manifold, p: _Point) -> _Model | None:
-    S = man.sensitivity(p)
-    if S is None:
-        return None
-    J = p.J
-    Jr = J[:, man.design].toarray() + J[:, man.state] @ S
+def _model(man: Manifold, p: _Point, lin: _Linearization) -> _Model:
+    S = lin.S
+    Jr = lin.J_design + lin.J_state @ S
     M = np.diag(man.design_weights)
     for k in range(0, man.pattern.size, ROWS):  # S_p' D_p S_p without a copy of S_p
         Sp = S[man.pattern[k:k + ROWS]] * np.sqrt(man.pattern_weights[k:k + ROWS])[:, None]
         M += Sp.T @ Sp
-    Gin = p.G[man.ineq]
     now = man.inequalities(p.g, p.x)
-    return _Model(H=Jr.T @ Jr, M=M, grad=Jr.T @ p.r,
-                  S=S, G_design=Gin[:, man.design].tocsr(), G_state=Gin[:, man.state].tocsr(),
+    JtJ = Jr.T @ Jr
+    return _Model(Jr=Jr, JtJ=JtJ, H=JtJ, M=M, grad=Jr.T @ p.r, lin=lin,
                   lower=man.lower - now, upper=man.upper - now)
 
 
+@dataclass
+class _Step:
+    """A step dd (n_d,) and the multipliers of the QP's rows ``which`` (CasADi's sign:
+    negative at a lower bound); both empty when no row entered a QP."""
+
+    dd: np.ndarray
+    which: np.ndarray
+    multipliers: np.ndarray
+
+
 class _Steps:
-    """The constrained step of a model: the unconstrained damped Gauss-Newton step, then,
-    while it breaks linearised inequalities, a QP over those rows (and the rows whose
-    slack is within twice their change) until it breaks none."""
+    """The constrained step of a model: the unconstrained damped step, then, while it
+    breaks linearised inequalities, a QP over those rows (and the rows whose slack is within
+    twice their change) until it breaks none."""
 
     def __init__(self, man: Manifold):
         self.man = man
@@ -234,35 +371,40 @@ class _Steps:
 
     def change(self, m: _Model, dd: np.ndarray) -> np.ndarray:
         """A dd for every inequality row."""
-        ds = m.S @ dd
-        return np.concatenate([m.G_design @ dd + m.G_state @ ds,
+        ds = m.lin.S @ dd
+        return np.concatenate([m.lin.G_design @ dd + m.lin.G_state @ ds,
                                dd[self.man.bounded_design], ds[self.man.bounded_state]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
-        """The dense rows ``which`` of A."""
-        man = self.man
+        """The dense rows ``which`` of A (which.size, n_d)."""
+        man, lin = self.man, m.lin
         ng, nbd = man.ineq.size, man.bounded_design.size
         A = np.zeros((which.size, man.design.size))
         g_rows = which < ng
         gi = which[g_rows]
-        A[g_rows] = m.G_design[gi].toarray() + m.G_state[gi] @ m.S
+        A[g_rows] = lin.G_design[gi].toarray() + lin.G_state[gi] @ lin.S
         d_rows = (which >= ng) & (which < ng + nbd)
         A[np.flatnonzero(d_rows), man.bounded_design[which[d_rows] - ng]] = 1.0
         s_rows = which >= ng + nbd
-        A[s_rows] = m.S[man.bounded_state[which[s_rows] - ng - nbd]]
+        A[s_rows] = lin.S[man.bounded_state[which[s_rows] - ng - nbd]]
         return A
 
-    def __call__(self, m: _Model, lam: float, shift: np.ndarray) -> np.ndarray | None:
+    def __call__(self, m: _Model, lam: float, shift: np.ndarray) -> _Step | None:
         H = m.H + lam * m.M
-        dd = np.linalg.solve(H, -m.grad)
+        try:
+            dd = la.cho_solve(la.cho_factor(H), -m.grad)
+        except la.LinAlgError:  # B made the damped model indefinite
+            return None
         lower, upper = m.lower + shift, m.upper - shift
         work = shift > 0
+        none = np.zeros(0, dtype=np.int64)
+        step = _Step(dd=dd, which=none, multipliers=np.zeros(0))
         solved = np.zeros(shift.size, dtype=bool)  # rows of the last QP: hold to its tolerance
         for _ in range(QP_ROUNDS):
-            Ad = self.change(m, dd)
+            Ad = self.change(m, step.dd)
             broken = ((Ad < lower) | (Ad > upper)) & ~solved
             if not broken.any():
-                return dd
+                return step
             work |= broken | (lower > -2 * np.abs(Ad)) | (upper < 2 * np.abs(Ad))
             which = np.flatnonzero(work)
             qp = self._qp(which.size)
@@ -270,7 +412,9 @@ class _Steps:
                      uba=np.minimum(upper[which], 1e20))
             if not qp.stats()["success"]:
                 return None
-            dd, solved = sol["x"].full().ravel(), work.copy()
+            step = _Step(dd=sol["x"].full().ravel(), which=which,
+                         multipliers=sol["lam_a"].full().ravel())
+            solved = work.copy()
         return None
 
     def _qp(self, rows: int) -> ca.Function:
@@ -283,17 +427,51 @@ class _Steps:
         return self._qps[rows]
 
 
+def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:
+    """The first-order optimality error of the reduced problem at the model's point, with
+    the step's QP multipliers y (of the right sign by the QP's own conditions): max of
+    |grad + A_W' y| (stationarity) and of |y_i| times row i's distance to the bound it
+    holds (complementarity), A_W the QP's rows."""
+    residual = m.grad.copy()
+    if step.which.size == 0:
+        return float(np.max(np.abs(residual)))
+    y = step.multipliers
+    residual += steps.rows(m, step.which).T @ y
+    lower_gap = np.minimum(-m.lower[step.which], 1e20)  # value - lower bound >= 0
+    upper_gap = np.minimum(m.upper[step.which], 1e20)
+    complementarity = np.maximum(np.maximum(-y, 0.0) * lower_gap, np.maximum(y, 0.0) * upper_gap)
+    return float(max(np.max(np.abs(residual)), np.max(complementarity)))
+
+
+def _secant(B: np.ndarray, step: np.ndarray, y: np.ndarray, y_sharp: np.ndarray) -> np.ndarray:
+    """B (n_d, n_d) updated over one accepted ``step`` (n_d,) (Dennis, Gay & Welsch): ``y``
+    the change of the Lagrangian's gradient, ``y_sharp`` its part that Jr' Jr does not
+    model (:meth:`_Last.gradient_change`), which B step should reproduce. Unchanged where
+    y' step <= 0."""
+    ys = float(y @ step)
+    if ys <= 0:
+        return B
+    sBs = float(step @ B @ step)
+    if sBs != 0:
+        B = B * min(1.0, abs(float(step @ y_sharp)) / abs(sBs))
+    v = y_sharp - B @ step
+    return B + (np.outer(v, y) + np.outer(y, v)) / ys - float(v @ step) * np.outer(y, y) / ys ** 2
+
+
 def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
                         deadline: float | None = None,
                         stop: Callable[[np.ndarray], bool] | None = None,
-                        callback: Callable[[float, float], None] | None = None) -> Outcome:
-    """Minimise the simultaneous NLP's loss over marched designs, from x (re-marched first).
+                        callback: Callable[[float, float], None] | None = None,
+                        tol: float = 1e-6, manifold: Manifold | None = None) -> Outcome:
+    """Minimise the simultaneous NLP's loss over marched designs, from x (re-marched first),
+    to first-order optimality (status "Solve_Succeeded", see the module docstring).
 
     ``damping``: the first lam; ``deadline``: a ``time.perf_counter()`` after which the run
     stops; ``stop(x)``: end once it holds at an accepted iterate; ``callback(objective,
-    violation)`` at the start and after every accepted step.
+    violation)`` at the start and after every accepted step; ``tol``: of the optimality
+    error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build).
     """
-    man = Manifold(nlp)
+    man = Manifold(nlp) if manifold is None else manifold
     start = nlp.project(np.asarray(x, dtype=float))
     p = None if start is None else man.point(start)
     if p is None or man.violation(p) > FEASIBLE:
@@ -303,20 +481,33 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         callback(p.objective, man.violation(p))
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
+    B = np.zeros((man.design.size, man.design.size))
+    augmented, scale, error, last = False, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
+        lin = man.linearize(p)
+        if lin is None:
+            status = "Stalled"
+            break
+        m = _model(man, p, lin)
+        if last is not None:
+            B = _secant(B, last.step, *last.gradient_change(m, steps, p))
+        if augmented and _positive_definite(m.H + B + lam * m.M):
+            m.H = m.H + B
+        scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)
         if deadline is not None and time.perf_counter() > deadline:
             status = "Maximum_WallTime_Exceeded"
             break
-        m = _model(man, p)
-        if m is None:
-            status = "Stalled"
-            break
         shift = np.zeros(m.lower.size)
-        corrections = 0
+        corrections, first = 0, True
         while lam <= MAX_DAMPING:
-            trial, dd = None, steps(m, lam, shift)
-            if dd is not None:
+            trial, step = None, steps(m, lam, shift)
+            if step is not None:
+                if first:
+                    error, first = _kkt_error(m, steps, step) / scale, False
+                    if error <= tol:
+                        break
+                dd = step.dd
                 predicted = -(m.grad @ dd + 0.5 * dd @ m.H @ dd)
                 xt = p.x.copy()
                 xt[man.design] += dd
@@ -335,20 +526,58 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         else:
             status = "Stalled"
             break
-        del m  # its sensitivities (GBs for large patterns) before the next model's
-        rho = (p.objective - trial.objective) / predicted
+        if error <= tol:
+            status = "Solve_Succeeded"
+            break
+        actual = p.objective - trial.objective
+        rho = actual / predicted
         lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
-        decrease = (p.objective - trial.objective) / p.objective
+        last = _Last(m, steps, step, trial.x[man.design] - p.x[man.design])
+        augmented = last.augmented_predicts_better(actual, B)
+        del m, lin  # the sensitivities (GBs for large patterns) before the next ones
         p, it = trial, it + 1
         if callback is not None:
             callback(p.objective, violation)
         if stop is not None and stop(p.x):
             status = "Fit_Reached"
             break
-        if decrease < MIN_DECREASE:
-            status = "Stalled"
-            break
-    return Outcome(x=p.x, objective=p.objective, iterations=it, status=status)
+    return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
+                   kkt_error=error)
+
+
+def _positive_definite(H: np.ndarray) -> bool:
+    try:
+        la.cho_factor(H)
+    except la.LinAlgError:
+        return False
+    return True
+
+
+class _Last:
+    """The model and accepted step of the last iteration, for the secant update and the
+    choice between the Gauss-Newton and the augmented model (NL2SOL's rule: the one whose
+    predicted reduction was nearer the actual one)."""
+
+    def __init__(self, m: _Model, steps: _Steps, step: _Step, change: np.ndarray):
+        self.Jr, self.grad, self.JtJ = m.Jr, m.grad, m.JtJ
+        self.which, self.multipliers = step.which, step.multipliers
+        self.A = steps.rows(m, step.which) if step.which.size else None
+        self.step = change
+
+    def gradient_change(self, m: _Model, steps: _Steps,
+                        p: _Point) -> tuple[np.ndarray, np.ndarray]:
+        """(y, y_sharp) of :func:`_secant` at the new model m: the change of the gradient
+        of the Lagrangian (the QP's multipliers held), and of its part that Jr' Jr misses."""
+        y, y_sharp = m.grad - self.grad, m.grad - self.Jr.T @ p.r
+        if self.A is not None:
+            dA = (steps.rows(m, self.which) - self.A).T @ self.multipliers
+            y, y_sharp = y + dA, y_sharp + dA
+        return y, y_sharp
+
+    def augmented_predicts_better(self, actual: float, B: np.ndarray) -> bool:
+        s = self.step
+        gauss_newton = -(self.grad @ s + 0.5 * s @ self.JtJ @ s)
+        return abs(actual - (gauss_newton - 0.5 * s @ B @ s)) < abs(actual - gauss_newton)
 
 
 def _linearization_error(man: Manifold, m: _Model, steps: _Steps, dd: np.ndarray,

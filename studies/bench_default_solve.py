@@ -1,0 +1,201 @@
+"""Benchmark of the default solve to optimality on the bundled targets.
+
+For each bundled target (targets/*.toml, its ``stop_rms`` dropped: the solve runs to the
+optimality conditions at ``tol``) at N x N panels (default 20) it solves, each in a fresh
+process with the given numbers of OpenBLAS threads (default 1 and 2):
+
+* ``default``: ``problem.solve(options)`` with the file's options, i.e. Levenberg-Marquardt
+  on the marching manifold alone (:mod:`rffqm_nlp.reduced`);
+* ``ipopt``: the same with ``solver="ipopt"`` (exact Hessian);
+* ``baseline``: the default solve of the code at ``--baseline`` (a git revision, exported
+  to a temporary folder with ``git archive``; default: the commit before this solver),
+  whose Levenberg-Marquardt stopped when a step gained less than 0.01% and handed over to
+  IPOPT.
+
+The yardstick, measured in this run: one forward evaluation of the NumPy model
+(``numpy_model.march`` of the problem's starting Miura + ``numpy_model.fold`` at omega0),
+best of ``--repeat`` x 10 calls; "solve / forward" is the solve's wall time over it.
+Times: "build" the transcription and its derivatives, "solve" the rest (wall, from the
+result's statistics), "cpu" the CPU time of the whole solve call.
+
+Then one default solve per target runs under cProfile (in a child, ``--threads`` first
+value), and so does the baseline's: the time spent in the solver's parts.
+
+Usage: ``python studies/bench_default_solve.py [--n 20] [--threads 1,2] [--repeat 1]
+[--baseline REV] [--out studies/results/bench_default_solve.md]``;
+``--smoke``: 4 x 4 panels, one thread, no baseline, output to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import json
+import os
+import pstats
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps it
+    sys.path.insert(0, str(ROOT))
+
+from common import (RESULTS, TARGETS, Run, add_smoke, fmt, run_child,  # noqa: E402
+                    smoke_dir, solve_in_child, target_problem)
+from rffqm_nlp import numpy_model  # noqa: E402
+
+#: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
+BASELINE = "0f9ad8d"
+GOAL = 0.5  # seconds of solve time at 20 x 20 panels (issue 21)
+#: (label, file, function) of the profile's rows: cumulative time in that function
+PARTS = [("whole solve", "design.py", "solve"),
+         ("  transcription", "design.py", "transcribe"),
+         ("  derivatives' build (Manifold)", "reduced.py", "__init__"),
+         ("Levenberg-Marquardt", "reduced.py", "levenberg_marquardt"),
+         ("  trial marches (NumPy model + NLP point)", "transcription.py", "project"),
+         ("  r, g (and before: J, G) at trial points", "reduced.py", "point"),
+         ("  J, G and S at accepted points", "reduced.py", "linearize"),
+         ("  sensitivity S", "reduced.py", "sensitivity"),
+         ("  model (Jr, J'J, metric)", "reduced.py", "_model"),
+         ("  optimality test", "reduced.py", "_kkt_error"),
+         ("  secant update", "reduced.py", "_secant"),
+         ("IPOPT handover", "design.py", "_solve_ipopt")]
+
+
+def forward_time(name: str, n: int, repeat: int) -> float:
+    """Best wall time (s) of one NumPy march + fold of the target's starting Miura."""
+    problem, _ = target_problem(name, n)
+    start = problem.start()
+    best = np.inf
+    for _ in range(10 * repeat):
+        t0 = time.perf_counter()
+        numpy_model.fold(numpy_model.march(start.boundary), start.omega)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def export_baseline(rev: str) -> Path:
+    """The package at git revision ``rev``, exported to a temporary folder."""
+    folder = Path(tempfile.mkdtemp(prefix="rffqm-baseline-"))
+    archive = subprocess.run(["git", "archive", rev, "rffqm_nlp"], cwd=ROOT, check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
+
+
+def solve_row(name: str, n: int, path: str, threads: int, package: Path) -> dict:
+    """One solve in a fresh process importing the package from ``package``."""
+    solve = {"stop_rms": None, **({"solver": "ipopt"} if path == "ipopt" else {})}
+    row = solve_in_child(name, n, solve=solve,
+                         env={"PYTHONPATH": str(package), "OPENBLAS_NUM_THREADS": str(threads)})
+    row.update(path=path, threads=threads)
+    return row
+
+
+def profile(name: str, n: int) -> dict[str, float | None]:
+    """Seconds in each of :data:`PARTS` in one default solve of the target."""
+    problem, options = target_problem(name, n)
+    profiler = cProfile.Profile()
+    profiler.enable()
+    problem.solve(replace(options, stop_rms=None))
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats  # (file, line, function) -> (.., .., .., cum, ..)
+    out: dict[str, float | None] = {}
+    for label, file, function in PARTS:
+        times = [v[3] for (f, _, fn), v in stats.items()
+                 if fn == function and Path(f).name == file and "rffqm_nlp" in f]
+        out[label] = max(times) if times else None
+    return out
+
+
+def profile_in_child(name: str, n: int, threads: int, package: Path) -> dict:
+    return run_child(__file__, "--profile-child", name, str(n),
+                     env={"PYTHONPATH": str(package), "OPENBLAS_NUM_THREADS": str(threads)})
+
+
+def table(rows: list[dict], forward: dict[str, float]) -> list[str]:
+    lines = ["| target | path | threads | status | iterations (LM) | build (s) | solve (s) "
+             "| cpu (s) | solve / forward | fit RMS / diameter |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        fit = (r.get("fit") or {}).get("rms")
+        solve = r.get("solve_time")
+        ratio = None if solve is None else solve / forward[r["target"]]
+        lines.append(
+            f"| {r['target']} | {r['path']} | {r['threads']} | {r.get('status', '-')} "
+            f"| {r.get('iterations', '-')} ({r.get('marched_iterations', '-')}) "
+            f"| {fmt(r.get('build_time'), '.2f')} | {fmt(solve, '.2f')} "
+            f"| {fmt(r.get('cpu'), '.2f')} | {fmt(ratio, '.0f')} | {fmt(fit, '.4f')} |")
+    return lines
+
+
+def profile_table(profiles: dict[tuple[str, str], dict]) -> list[str]:
+    keys = list(profiles)
+    lines = ["| part | " + " | ".join(f"{t} ({p})" for t, p in keys) + " |",
+             "|---|" + "---|" * len(keys)]
+    for label, _, _ in PARTS:
+        cells = [fmt(profiles[k].get(label), ".2f") for k in keys]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=20)
+    parser.add_argument("--threads", default="1,2")
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--baseline", default=BASELINE)
+    parser.add_argument("--out", type=Path, default=RESULTS / "bench_default_solve.md")
+    add_smoke(parser)
+    args = parser.parse_args()
+    if args.smoke:
+        args.n, args.threads, args.baseline = 4, "1", None
+        args.out = smoke_dir("bench_default_solve") / "bench_default_solve.md"
+    threads = [int(t) for t in args.threads.split(",")]
+    run = Run()
+    forward = {name: forward_time(name, args.n, args.repeat) for name in TARGETS}
+    packages = {"default": ROOT, "ipopt": ROOT}
+    if args.baseline:
+        packages["baseline"] = export_baseline(args.baseline)
+    rows = []
+    for t in threads:
+        for name in TARGETS:
+            for path, package in packages.items():
+                for _ in range(args.repeat):
+                    rows.append(solve_row(name, args.n, path, t, package))
+                    print(json.dumps({k: rows[-1].get(k) for k in
+                                      ("target", "path", "threads", "status", "iterations",
+                                       "build_time", "solve_time")}), flush=True)
+    profiles = {}
+    for name in TARGETS:
+        for path in ("default", "baseline"):
+            if path in packages:
+                profiles[(name, path)] = profile_in_child(name, args.n, threads[0],
+                                                          packages[path])
+    lines = [f"# The default solve to optimality at {args.n} x {args.n} panels", "",
+             run.header(), "",
+             "Command: `" + " ".join(["python studies/bench_default_solve.py", *sys.argv[1:]])
+             + "`", "",
+             "Yardstick, one NumPy forward evaluation (march + fold), best wall time (ms): "
+             + ", ".join(f"{k} {1e3 * v:.1f}" for k, v in forward.items()) + ".", "",
+             *table(rows, forward), "",
+             f"Goal: solve <= {GOAL} s at 20 x 20 panels. Profile (cumulative seconds, "
+             f"{threads[0]} thread(s), one solve each; cProfile inflates them):", "",
+             *profile_table(profiles), ""]
+    text = "\n".join(lines)
+    print(text)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "--profile-child":
+        print(json.dumps(profile(sys.argv[2], int(sys.argv[3]))))
+    else:
+        main()
