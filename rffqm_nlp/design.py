@@ -687,12 +687,12 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 
     A file whose suffix names a format trimesh reads (:func:`rffqm_nlp.meshes.is_mesh_file`:
     OBJ, STL, PLY, OFF, GLB, XYZ, ...) is a mesh or point cloud: its
-    :class:`~rffqm_nlp.meshes.Mesh` (by its absolute path) with the default design and
+    :class:`~rffqm_nlp.meshes.Mesh` (by its resolved path) with the default design and
     solve options."""
     from .meshes import is_mesh_file  # here: meshes imports surfaces, which imports Mesh
 
     if is_mesh_file(path):
-        return DesignProblem(surfaces.Mesh(Path(path).absolute())), SolveOptions()
+        return DesignProblem(surfaces.Mesh(Path(path).resolve())), SolveOptions()
     return from_config(read_toml(path, "design file"), Path(path).parent, trust)
 
 

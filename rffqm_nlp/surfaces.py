@@ -763,6 +763,8 @@ DOMAIN_KEY = Key("list", length=2, item=Key("list", length=2, item=Key("number")
 PYTHON_KEYS = {"python": Key("string", required=True),
                "domain": Key("list", length=2, item=DOMAIN_KEY.item, required=True,
                              hint=DOMAIN_KEY.hint)}
+#: The keys of a [target] table with mesh = ... (a mesh or point cloud file: :class:`Mesh`)
+MESH_KEYS = {"mesh": Key("string", required=True)}
 
 
 def target_keys(name: str) -> dict[str, Key]:
@@ -777,7 +779,8 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
     """The surface of a ``[target]`` table: ``name = "..."`` plus parameters and an optional
     ``domain = [[u0, u1], [v0, v1]]``, or ``python = "file.py:function"`` (a file relative to
     ``root``, default the current folder) or ``python = "package.module:function"``, plus a
-    required ``domain``.
+    required ``domain``, or ``mesh = "part.stl"`` (a mesh or point cloud file relative to
+    ``root``: its :class:`Mesh`, by its resolved absolute path).
 
     Code named by ``python`` runs only with ``trust=True`` (a target file from someone else
     must not run code unless asked to); without it :class:`SurfaceError` names the code.
@@ -791,6 +794,8 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
             "and no config names it; rebuild the problem by passing the surface: "
             "DesignProblem(target=<your surface>, **result.problem['design']), or in a file "
             "name a function with python = \"file.py:function\" and domain")
+    if "mesh" in table:
+        return Mesh((Path(root or ".") / _checked(table, MESH_KEYS)["mesh"]).resolve())
     if "python" in table and "name" in table:
         raise SurfaceError("[target] takes name (a built-in surface) or python (your own "
                            "function), not both")
@@ -803,7 +808,8 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
         return Custom(_import_reference(ref), values["domain"], reference=ref)
     if "name" not in table:
         raise SurfaceError("the [target] table needs name = \"<surface>\" (one of "
-                           f"{', '.join(_BUILTINS)}) or python = \"file.py:function\"")
+                           f"{', '.join(_BUILTINS)}), python = \"file.py:function\" or "
+                           "mesh = \"part.stl\"")
     name = _checked_value(table["name"], Key("choice", choices=tuple(_BUILTINS)), "[target] name")
     values = _checked(table, target_keys(name))
     values.pop("name")

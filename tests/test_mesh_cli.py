@@ -91,7 +91,7 @@ def test_load_design_reads_a_mesh_file_with_the_default_options(tmp_path, monkey
     monkeypatch.chdir(tmp_path)
     problem, options = rq.load_design("cap.stl")
     assert isinstance(problem.target, rq.surfaces.Mesh)
-    assert problem.target.to_config() == {"mesh": str(path.absolute())}
+    assert problem.target.to_config() == {"mesh": str(path.resolve())}
     assert options == rq.SolveOptions() and problem.panels == design.DesignProblem(
         problem.target).panels
     assert rq.meshes.is_mesh_file("a/B.PLY") and not rq.meshes.is_mesh_file("a/b.toml")
@@ -112,7 +112,7 @@ def test_design_from_a_mesh_file(tmp_path, monkeypatch):
     res = run_design(path, out, "--panels", "8", "8")
     assert res.exit_code == 0, res.output
     data = json.loads((out / "result.json").read_text())
-    assert data["problem"]["target"] == {"mesh": str(path)}
+    assert data["problem"]["target"] == {"mesh": str(path.resolve())}
     assert data["problem"]["design"]["panels"] == [8, 8]
     fit = data["fit"]
     assert fit["rms_surface"] < 0.25 * fit["plane_rms"] and 0.9 < fit["coverage"] < 1.1
@@ -123,3 +123,39 @@ def test_design_from_a_mesh_file(tmp_path, monkeypatch):
     assert isinstance(target, trimesh.Trimesh) and len(target.vertices) == 41 * 41
     moved = target.vertices @ result.rotation.T + result.translation
     assert trimesh.proximity.closest_point(trimesh.load(path), moved)[1].max() < 1e-9
+    # the saved result rebuilds its target from the path
+    assert isinstance(rq.surfaces.from_config(data["problem"]["target"]), rq.surfaces.Mesh)
+
+
+def test_a_design_file_names_a_mesh_relative_to_itself(tmp_path, monkeypatch):
+    (tmp_path / "jobs" / "shapes").mkdir(parents=True)
+    path = cap_mesh(tmp_path / "jobs" / "shapes")
+    toml = tmp_path / "jobs" / "part.toml"
+    toml.write_text('[target]\nmesh = "shapes/cap.stl"\n\n[design]\npanels = [8, 8]\n\n'
+                    '[solve]\nstop_rms = 0.02\n')
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    problem, options = rq.load_design(Path("..") / "jobs" / "part.toml")
+    assert isinstance(problem.target, rq.surfaces.Mesh) and problem.panels == (8, 8)
+    assert problem.target.path == path.resolve() and options.stop_rms == 0.02
+    assert problem.to_config()["target"] == {"mesh": str(path.resolve())}
+
+
+@pytest.mark.parametrize("table, fragments", [
+    ('mesh = 3', ["[target] mesh", "string"]),
+    ('mesh = "shapes/none.stl"', ["none.stl", "no such file"]),
+    ('mesh = "cap.stl"\nname = "sphere_cap"', ["[target]", "name"]),
+    ('mesh = "cap.stl"\nknots = [8, 8]', ["[target]", "knots"]),
+])
+def test_bad_mesh_keys_are_refused_in_one_line(tmp_path, table, fragments):
+    cap_mesh(tmp_path)
+    toml = tmp_path / "part.toml"
+    toml.write_text(f"[target]\n{table}\n")
+    out = tmp_path / "out"
+    res = run_design(toml, out)
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert res.exit_code == 2 and len(lines) == 1, res.output
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert not out.exists()
