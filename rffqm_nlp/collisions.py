@@ -25,9 +25,10 @@ Method.
   the pair's distance can change over the step: SAFETY times the largest relative
   displacement of a vertex of one panel against a vertex of the other between w0 and w1
   (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex).
-  Distances are first bounded from below cheaply (centre distance minus radii, and how
-  far one panel lies on one side of the other's plane); the exact distance is computed
-  only where that bound does not certify the step.
+  Distances are first bounded from below cheaply (centre distance minus radii, how far
+  one panel lies on one side of the other's plane, and the gap between the two panels'
+  projections on the line through their centres); the exact distance is computed only
+  where that bound does not certify the step.
   Uncertified pairs are followed into the halves of the step (one batched fold per
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
@@ -162,14 +163,42 @@ class _Geometry:
 
 def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
     """Pairs (n, 2), p < q, sharing no vertex, whose spheres grown by ``reach`` overlap."""
-    r = 2 * geo.radius.max() + reach
-    pq = cKDTree(C).query_pairs(r, output_type="ndarray")
-    if pq.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    p, q = pq[:, 0], pq[:, 1]
-    keep = geo.non_adjacent(p, q) & (_norm(C[p] - C[q])
-                                     <= geo.radius[p] + geo.radius[q] + reach)
-    return pq[keep]
+    p, q, _ = _near(geo, _table(geo, C), reach)
+    return np.stack([p, q], axis=1)
+
+
+def _table(geo: _Geometry, C: np.ndarray) -> np.ndarray:
+    """The broad phase's panel table (6, P), one row per quantity (gathers by column are
+    several times faster than by panel): centroid x, y, z (from C (P, 3)), radius, i, j."""
+    return np.concatenate([C.T, geo.radius[None], geo.ij.T])
+
+
+def _near(geo: _Geometry, T: np.ndarray, reach: float) -> tuple[np.ndarray, ...]:
+    """The pairs p < q (n,) sharing no vertex whose bounding spheres are at most ``reach``
+    apart, from a panel table T (:func:`_table`), and those gaps g (n,) (:func:`_gap`)."""
+    r = (2 * geo.radius.max() + reach) * (1 + 1e-9)
+    pq = cKDTree(T[:3].T).query_pairs(r, output_type="ndarray").reshape(-1, 2)
+    pq = np.ascontiguousarray(pq.T)                                  # (2, n)
+    A, B = T.take(pq[0], axis=1), T.take(pq[1], axis=1)              # (6, n)
+    g = _gap(A, B)
+    keep = np.flatnonzero((np.maximum(np.abs(A[4] - B[4]), np.abs(A[5] - B[5])) >= 2)
+                          & (g <= reach))
+    return pq[0, keep], pq[1, keep], g[keep]
+
+
+def _gap(A: np.ndarray, B: np.ndarray, at: int = 0) -> np.ndarray:
+    """Sphere gaps (n,): centre distance minus both radii, a lower bound on the distance of
+    two panels, from the columns A, B (w, n) of a panel table with a centre in rows
+    at..at+2 and the radius in row 3."""
+    d = [A[at + k] - B[at + k] for k in range(3)]
+    return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - A[3] - B[3]
+
+
+def _shift(A: np.ndarray, B: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Relative displacement (n,) of two panels' centres, |(A[b:b+3] - A[a:a+3]) -
+    (B[b:b+3] - B[a:a+3])|, from the columns A, B (w, n) of a panel table."""
+    d = [A[b + k] - A[a + k] - B[b + k] + B[a + k] for k in range(3)]
+    return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
 def panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
@@ -277,18 +306,18 @@ def _vertex_face_distance(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 def _flat_overlaps(geo: _Geometry) -> list[PanelPair]:
     """Pairs of panels whose interiors overlap in the flat pattern (omega = 0)."""
     X = geo.pat.X.reshape(-1, 3)[:, :2]
-    C = X[geo.corners].mean(axis=1)
+    C = _centroid(X[geo.corners])
     pq = cKDTree(C).query_pairs(2 * geo.radius.max(), output_type="ndarray")
     if pq.size == 0:
         return []
     ring = geo.corners[:, [0, 2, 3, 1]]                             # a, c, d, b around
     P, Q = X[ring[pq[:, 0]]], X[ring[pq[:, 1]]]                     # (n, 4, 2)
     edges = np.concatenate([np.roll(P, -1, axis=1) - P, np.roll(Q, -1, axis=1) - Q], axis=1)
-    axes = np.stack([-edges[..., 1], edges[..., 0]], axis=-1)       # (n, 8, 2)
-    pP = np.einsum("nak,nvk->nav", axes, P)
-    pQ = np.einsum("nak,nvk->nav", axes, Q)
-    eps = 1e-9 * geo.scale * np.linalg.norm(axes, axis=2)
-    gap = np.maximum(pQ.min(axis=2) - pP.max(axis=2), pP.min(axis=2) - pQ.max(axis=2))
+    ax, ay = -edges[..., 1:2], edges[..., 0:1]                      # (n, 8, 1)
+    pP = ax * P[:, None, :, 0] + ay * P[:, None, :, 1]              # (n, 8, 4)
+    pQ = ax * Q[:, None, :, 0] + ay * Q[:, None, :, 1]
+    eps = 1e-9 * geo.scale * np.hypot(ax, ay)[..., 0]
+    gap = np.maximum(_least(pQ) - _most(pP), _least(pP) - _most(pQ))
     hit = ~np.any(gap > -eps, axis=1)
     return sorted(geo.label(p, q) for p, q in pq[hit])
 
@@ -302,21 +331,21 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
     W = abs(w_max)
     n_steps = max(1, int(np.ceil(W / MAX_STEP)))
     st = _States(geo, sign, np.linspace(0.0, W, n_steps + 1))
-    margin = geo.radius.max() + clearance
-    near = [_near_pairs(geo, c, margin) for c in st.C]
-    rows = _coarse_rows(geo, near, st, clearance)
+    rows, m = _coarse_rows(geo, st, n_steps + 1, geo.radius.max() + clearance, clearance)
     best, contact = np.inf, []
     while rows.size:
         omegas = np.asarray(st.omegas)
-        rows = rows[omegas[rows[:, 0]] < best]
+        keep = omegas[rows[:, 0]] < best
+        rows, m = rows[keep], m[keep]
         if not rows.size:
             break
         ia, ib, p, q = rows.T
         wa, wb, n = omegas[ia], omegas[ib], len(rows)
-        m = SAFETY * _motion(st, ia, ib, p, q)
         d = _per_state(_lower_bound, st, np.concatenate([ia, ib]), np.tile(p, 2),
                        np.tile(q, 2))
         da, db = d[:n], d[n:]
+        loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
+        m[loose] = SAFETY * _motion(st, ia[loose], ib[loose], p[loose], q[loose])
         exact = (da + db - m) / 2 <= clearance
         k = int(exact.sum())
         d = _per_state(_distance, st, np.concatenate([ia[exact], ib[exact]]),
@@ -332,6 +361,7 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
                 best = w_hit
         open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
         rows = _split(rows[open_], st)
+        m = np.full(len(rows), np.inf)
     if not np.isfinite(best):
         return None, []
     return sign * float(best) if best > 0 else 0.0, contact
@@ -365,26 +395,39 @@ class _States:
 def _motion(st: _States, ia, ib, p, q) -> np.ndarray:
     """The largest displacement (n,) of a vertex of panel q relative to a vertex of panel
     p from state ia to state ib (all (n,)), over the 16 vertex pairs."""
-    dP = st.Q[ib, p] - st.Q[ia, p]                                  # (n, 4, 3)
-    dQ = st.Q[ib, q] - st.Q[ia, q]
+    dP = _at(st.Q, ib, p) - _at(st.Q, ia, p)                        # (n, 4, 3)
+    dQ = _at(st.Q, ib, q) - _at(st.Q, ia, q)
     return _most(_norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
 
 
 def _lower_bound(st: _States, s, p, q) -> np.ndarray:
     """Cheap lower bounds (n,) on the distances of panels p and q in states s (all (n,)):
-    the larger of the bounding spheres' gap and the plane gap (how far one panel lies
-    wholly on one side of the other's plane)."""
-    P, Q = st.Q[s, p], st.Q[s, q]                                   # (n, 4, 3)
-    lb = _norm(st.C[s, p] - st.C[s, q]) - st.geo.radius[p] - st.geo.radius[q]
-    for A, B, nA in ((P, Q, st.n[s, p]), (Q, P, st.n[s, q])):
+    the largest of the bounding spheres' gap, the plane gap (how far one panel lies
+    wholly on one side of the other's plane) and the gap between the panels' projections
+    on the line through their centroids (a separating axis that certifies most pairs of
+    nearly flat or nearly parallel neighbours)."""
+    P, Q = _at(st.Q, s, p), _at(st.Q, s, q)                         # (n, 4, 3)
+    u = _at(st.C, s, q) - _at(st.C, s, p)
+    dist = _norm(u)
+    lb = dist - st.geo.radius[p] - st.geo.radius[q]
+    for A, B, nA in ((P, Q, _at(st.n, s, p)), (Q, P, _at(st.n, s, q))):
         h = _dot(B - A[:, :1], nA[:, None])                         # (n, 4)
         lb = np.maximum(lb, np.maximum(_least(h), -_most(h)))
-    return lb
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u /= dist[:, None]
+    gap = _least(_dot(Q, u[:, None])) - _most(_dot(P, u[:, None]))  # along the centres
+    return np.maximum(lb, np.where(dist > 0, gap, -np.inf))
 
 
 def _distance(st: _States, s, p, q) -> np.ndarray:
     """Exact distances (n,) of panels p and q in states s (all (n,))."""
-    return _quad_distance(st.Q[s, p], st.Q[s, q], st.geo.scale)
+    return _quad_distance(_at(st.Q, s, p), _at(st.Q, s, q), st.geo.scale)
+
+
+def _at(X: np.ndarray, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """X[s, p] (n, ...) of a contiguous X (K, P, ...): np.take on the flattened leading
+    axes, several times faster than fancy indexing."""
+    return np.take(X.reshape(-1, *X.shape[2:]), s * X.shape[1] + p, axis=0)
 
 
 def _per_state(f, st: _States, s, p, q) -> np.ndarray:
@@ -439,31 +482,45 @@ def _most(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _coarse_rows(geo: _Geometry, near: list[np.ndarray], st: _States,
-                 clearance: float) -> np.ndarray:
-    """Rows (n, 4) = (state a, state b, p, q): the candidate pairs of every coarse step
-    (the K coarse states are the first K of ``st``) that the sphere bounds do not certify
-    clear; the motion bound here, the centres' relative displacement plus each panel's
-    largest vertex displacement about its centre, is at least :func:`_motion`'s."""
+def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
+                 clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (n, 4) = (state a, state b, p, q): for every step between the K coarse states
+    (the first K of ``st``), the pairs whose spheres grown by ``margin`` overlap at either
+    end (:func:`_near`, one tree per state) and that the sphere gaps do not certify clear;
+    and SAFETY times the rows' motion bound (n,) used here, the centres' relative
+    displacement plus each panel's largest vertex displacement about its centre (at least
+    :func:`_motion`'s)."""
     P = geo.N * geo.M
-    K = len(near)
     C = st.C[:K]
     dC = C[1:] - C[:-1]                                              # (K-1, P, 3)
     spin = _most(_norm(st.Q[1:K] - st.Q[:K - 1] - dC[:, :, None]))  # (K-1, P)
-    out = []
-    for k in range(len(near) - 1):
-        code = np.sort(np.concatenate([near[k][:, 0] * P + near[k][:, 1],
-                                       near[k + 1][:, 0] * P + near[k + 1][:, 1]]))
-        first = np.ones(len(code), dtype=bool)
-        first[1:] = code[1:] != code[:-1]
-        p, q = np.divmod(code[first], P)
-        radii = geo.radius[p] + geo.radius[q]
-        m = SAFETY * (_norm(dC[k, p] - dC[k, q]) + spin[k, p] + spin[k, q])
-        lb = _norm(C[k, p] - C[k, q]) + _norm(C[k + 1, p] - C[k + 1, q]) - 2 * radii
-        keep = (lb - m) / 2 <= clearance
+    Cx = np.concatenate([C[:1], C, C[-1:]])                          # C[k -+ 1], ends padded
+    sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))])
+    near = []                    # per state k: p, q, gaps at k - 1, k, k + 1, bounds m
+    for k in range(K):           # of the steps before and after k
+        T = _table(geo, C[k])
+        p, q, g = _near(geo, T, margin)
+        X = np.concatenate([T[:4], Cx[k].T, Cx[k + 2].T, sx[k:k + 2]])   # (12, P)
+        A, B = X.take(p, axis=1), X.take(q, axis=1)
+        m = [SAFETY * (_shift(A, B, a, b) + A[s] + B[s]) for a, b, s in ((4, 0, 10),
+                                                                        (0, 7, 11))]
+        near.append((p, q, [_gap(A, B, 4), g, _gap(A, B, 7)], m))
+    rows, bounds = [], []
+    for k in range(K - 1):
+        pa, qa, ga, ma = near[k]
+        pb, qb, gb, mb = near[k + 1]
+        new = gb[0] > margin                     # near at k + 1 only (else in near[k])
+        p, q = np.concatenate([pa, pb[new]]), np.concatenate([qa, qb[new]])
+        g0 = np.concatenate([ga[1], gb[0][new]])
+        g1 = np.concatenate([ga[2], gb[1][new]])
+        m = np.concatenate([ma[1], mb[0][new]])
+        keep = (g0 + g1 - m) / 2 <= clearance
         p, q = p[keep], q[keep]
-        out.append(np.stack([np.full_like(p, k), np.full_like(p, k + 1), p, q], axis=1))
-    return np.concatenate(out) if out else np.zeros((0, 4), dtype=np.int64)
+        rows.append(np.stack([np.full_like(p, k), np.full_like(p, k + 1), p, q], axis=1))
+        bounds.append(m[keep])
+    if not rows:
+        return np.zeros((0, 4), dtype=np.int64), np.zeros(0)
+    return np.concatenate(rows), np.concatenate(bounds)
 
 
 def _split(rows: np.ndarray, st: _States) -> np.ndarray:
