@@ -21,8 +21,9 @@ from rffqm_nlp.results import DesignResult, Fit
 
 TARGET = Path(__file__).resolve().parents[1] / "targets" / "sphere_cap.toml"
 #: A seed of the paper's Fig. Random recipe (10 x 10, angles +-0.1 pi, LP lengths) whose
-#: panels (3, 10) and (8, 8) pass through each other at omega 1.6.
-COLLIDING_SEED = 16
+#: panels never intersect up to omega 2.5 but whose panels (6, 1) and (8, 1) come within a
+#: sheet thickness of 0.003 at omega 1.56.
+SEED, THICKNESS = 29, 0.003
 
 
 def invoke(*args):
@@ -60,8 +61,8 @@ def min_distance(pattern: rq.Pattern, omega: float) -> float:
     return float(triangle_distance(A, B).min())
 
 
-def colliding_pattern() -> rq.Pattern:
-    bd = rq.perturb_angles(rq.miura_boundary(10, 10), 0.1 * np.pi, COLLIDING_SEED)
+def random_pattern() -> rq.Pattern:
+    bd = rq.perturb_angles(rq.miura_boundary(10, 10), 0.1 * np.pi, SEED)
     return nm.march(side_length_lp(bd))
 
 
@@ -97,12 +98,17 @@ def test_check_a_free_design_exits_0(result, tmp_path):
     assert "collision-free" in res.output and "none" in res.output
 
 
-def test_check_a_colliding_fold_file_exits_1_with_the_pairs(tmp_path):
-    foldfile.write_fold(tmp_path / "random.fold", colliding_pattern(), 1.7)
-    res = invoke("check", tmp_path / "random.fold")
+def test_check_a_fold_file_in_contact_exits_1_with_the_pairs(tmp_path):
+    pat = random_pattern()
+    foldfile.write_fold(tmp_path / "random.fold", pat, 2.5)
+    report = rq.collisions.collisions(pat, 2.5, clearance=THICKNESS)
+    assert report.pairs == [((6, 1), (8, 1))]
+    assert report.first_omega == pytest.approx(1.56, abs=0.01)
+    res = invoke("check", tmp_path / "random.fold", "--clearance", THICKNESS)
     assert res.exit_code == 1, res.output
-    assert "(3, 10)-(8, 8)" in res.output and "1.6" in res.output
-    early = invoke("check", tmp_path / "random.fold", "--omega", 1.2)
+    assert "(6, 1)-(8, 1)" in res.output and f"{report.first_omega:.6g}" in res.output
+    assert invoke("check", tmp_path / "random.fold").exit_code == 0
+    early = invoke("check", tmp_path / "random.fold", "--clearance", THICKNESS, "--omega", 1.5)
     assert early.exit_code == 0, early.output
 
 
