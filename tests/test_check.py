@@ -156,3 +156,20 @@ def test_min_clearance_is_validated():
         problem(min_clearance=-0.1)
     with pytest.raises(rq.InputError, match="min_clearance"):
         problem(min_clearance=float("nan"))
+
+
+def test_render_marks_the_panels_in_contact_red(tmp_path):
+    from rffqm_nlp import viz
+
+    ok, reason = viz.rendering_available()
+    assert ok, f"off-screen rendering is unavailable: {reason}"
+    import imageio.v3 as iio
+
+    pat = random_pattern()
+    report = rq.collisions.collisions(pat, 2.5, clearance=THICKNESS)
+    red = []
+    for name, contacts in (("plain.png", None), ("marked.png", report)):
+        img = iio.imread(viz.render_png(tmp_path / name, pat, report.first_omega,
+                                        contacts=contacts)).astype(int)
+        red.append(int((img[..., 0] - np.maximum(img[..., 1], img[..., 2]) > 80).sum()))
+    assert red[0] == 0 and red[1] > 20, red             # shaded red: about (140, 0, 0)
