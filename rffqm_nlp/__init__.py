@@ -18,7 +18,7 @@ from .marching import fold, march
 from .design import DesignProblem, SolveOptions, load_design
 from .results import DesignResult, Fit, SolveStats
 
-_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "side_lengths", "surfaces",
+_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "surfaces",
                "shape", "design", "transcription", "results", "files", "foldfile", "export",
                "viz", "cli", "sweeps")
 
