@@ -18,17 +18,23 @@ Method.
   smallest of their four triangle pairs.
 * Broad phase: a :class:`scipy.spatial.cKDTree` on panel centres at each coarse sample;
   candidate pairs are the panels whose bounding spheres, grown by the clearance and a
-  margin of the largest panel radius, overlap at either end of a coarse step.
+  margin of the largest panel radius, overlap at either end of a coarse step. Its tables
+  (centres, radii, each step's centre displacements and spins) are float32 and held by
+  column; every sphere gap they give is lowered, every motion bound raised, by a bound on
+  the float32 rounding, so they drop no pair that the float64 arithmetic would keep.
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair is certified clear when
   (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance and m bounds how far
   the pair's distance can change over the step: SAFETY times the largest relative
   displacement of a vertex of one panel against a vertex of the other between w0 and w1
-  (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex).
-  Distances are first bounded from below cheaply (centre distance minus radii, how far
-  one panel lies on one side of the other's plane, and the gap between the two panels'
-  projections on the line through their centres); the exact distance is computed only
-  where that bound does not certify the step.
+  (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex;
+  the 16 vertex pairs are compared, after a coarser bound, the centres' relative
+  displacement plus each panel's largest vertex displacement about its centre, has
+  failed to certify the step). Distances are first bounded from below cheaply (centre
+  distance minus radii, how far one panel lies on one side of the other's plane, and the
+  gap between the two panels' projections on the line through their centres); the exact
+  distance is computed only where that bound does not certify the step, and only an
+  exact distance reports a contact.
   Uncertified pairs are followed into the halves of the step (one batched fold per
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
@@ -163,27 +169,35 @@ class _Geometry:
 
 def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
     """Pairs (n, 2), p < q, sharing no vertex, whose spheres grown by ``reach`` overlap."""
-    p, q, _ = _near(geo, _table(geo, C), reach)
+    p, q, _ = _near(geo, _table(geo, C, np.float64), reach)
     return np.stack([p, q], axis=1)
 
 
-def _table(geo: _Geometry, C: np.ndarray) -> np.ndarray:
+def _table(geo: _Geometry, C: np.ndarray, dtype: type) -> np.ndarray:
     """The broad phase's panel table (6, P), one row per quantity (gathers by column are
     several times faster than by panel): centroid x, y, z (from C (P, 3)), radius, i, j."""
-    return np.concatenate([C.T, geo.radius[None], geo.ij.T])
+    return np.concatenate([C.T, geo.radius[None], geo.ij.T]).astype(dtype)
 
 
 def _near(geo: _Geometry, T: np.ndarray, reach: float) -> tuple[np.ndarray, ...]:
     """The pairs p < q (n,) sharing no vertex whose bounding spheres are at most ``reach``
-    apart, from a panel table T (:func:`_table`), and those gaps g (n,) (:func:`_gap`)."""
-    r = (2 * geo.radius.max() + reach) * (1 + 1e-9)
+    apart, from a panel table T (:func:`_table`), and those gaps g (n,) (:func:`_gap`,
+    in T's precision; the tree's radius allows for float32 rounding)."""
+    r = 2 * geo.radius.max() + reach + _slack(geo, T[:3])
     pq = cKDTree(T[:3].T).query_pairs(r, output_type="ndarray").reshape(-1, 2)
     pq = np.ascontiguousarray(pq.T)                                  # (2, n)
-    A, B = T.take(pq[0], axis=1), T.take(pq[1], axis=1)              # (6, n)
+    A, B = T.take(pq[0], axis=1, mode="clip"), T.take(pq[1], axis=1, mode="clip")  # (6, n)
     g = _gap(A, B)
     keep = np.flatnonzero((np.maximum(np.abs(A[4] - B[4]), np.abs(A[5] - B[5])) >= 2)
                           & (g <= reach))
     return pq[0, keep], pq[1, keep], g[keep]
+
+
+def _slack(geo: _Geometry, C: np.ndarray) -> float:
+    """A bound on the float32 rounding error of a sphere gap or a relative displacement
+    computed from centroids C (any shape) and the radii: 1e-5 (over a hundred units in
+    the last place) times the largest coordinate plus the largest radius."""
+    return 1e-5 * (float(np.abs(C).max(initial=0.0)) + float(geo.radius.max()))
 
 
 def _gap(A: np.ndarray, B: np.ndarray, at: int = 0) -> np.ndarray:
@@ -427,7 +441,7 @@ def _distance(st: _States, s, p, q) -> np.ndarray:
 def _at(X: np.ndarray, s: np.ndarray, p: np.ndarray) -> np.ndarray:
     """X[s, p] (n, ...) of a contiguous X (K, P, ...): np.take on the flattened leading
     axes, several times faster than fancy indexing."""
-    return np.take(X.reshape(-1, *X.shape[2:]), s * X.shape[1] + p, axis=0)
+    return np.take(X.reshape(-1, *X.shape[2:]), s * X.shape[1] + p, axis=0, mode="clip")
 
 
 def _per_state(f, st: _States, s, p, q) -> np.ndarray:
@@ -494,14 +508,16 @@ def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
     C = st.C[:K]
     dC = C[1:] - C[:-1]                                              # (K-1, P, 3)
     spin = _most(_norm(st.Q[1:K] - st.Q[:K - 1] - dC[:, :, None]))  # (K-1, P)
-    Cx = np.concatenate([C[:1], C, C[-1:]])                          # C[k -+ 1], ends padded
-    sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))])
+    f32 = np.float32                             # the broad phase only, with a slack eps:
+    eps = _slack(geo, C)                         # gaps - eps, bounds + eps are safe
+    Cx = np.concatenate([C[:1], C, C[-1:]]).astype(f32)              # C[k -+ 1], ends padded
+    sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))]).astype(f32)
     near = []                    # per state k: p, q, gaps at k - 1, k, k + 1, bounds m
     for k in range(K):           # of the steps before and after k
-        T = _table(geo, C[k])
-        p, q, g = _near(geo, T, margin)
+        T = _table(geo, C[k], f32)
+        p, q, g = _near(geo, T, margin + eps)
         X = np.concatenate([T[:4], Cx[k].T, Cx[k + 2].T, sx[k:k + 2]])   # (12, P)
-        A, B = X.take(p, axis=1), X.take(q, axis=1)
+        A, B = X.take(p, axis=1, mode="clip"), X.take(q, axis=1, mode="clip")
         m = [SAFETY * (_shift(A, B, a, b) + A[s] + B[s]) for a, b, s in ((4, 0, 10),
                                                                         (0, 7, 11))]
         near.append((p, q, [_gap(A, B, 4), g, _gap(A, B, 7)], m))
@@ -509,15 +525,15 @@ def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
     for k in range(K - 1):
         pa, qa, ga, ma = near[k]
         pb, qb, gb, mb = near[k + 1]
-        new = gb[0] > margin                     # near at k + 1 only (else in near[k])
+        new = gb[0] > margin + eps               # near at k + 1 only (else in near[k])
         p, q = np.concatenate([pa, pb[new]]), np.concatenate([qa, qb[new]])
         g0 = np.concatenate([ga[1], gb[0][new]])
         g1 = np.concatenate([ga[2], gb[1][new]])
         m = np.concatenate([ma[1], mb[0][new]])
-        keep = (g0 + g1 - m) / 2 <= clearance
+        keep = (g0 + g1 - m) / 2 <= clearance + 2 * eps
         p, q = p[keep], q[keep]
         rows.append(np.stack([np.full_like(p, k), np.full_like(p, k + 1), p, q], axis=1))
-        bounds.append(m[keep])
+        bounds.append(m[keep].astype(float) + eps)
     if not rows:
         return np.zeros((0, 4), dtype=np.int64), np.zeros(0)
     return np.concatenate(rows), np.concatenate(bounds)

@@ -212,3 +212,62 @@ def test_random_recipe_free_agrees_with_dense_scan():
     pat = random_recipe(22)
     assert collisions(pat, 2.0).free
     assert dense_min(pat, np.linspace(0, 2.0, 40)) > 0
+
+
+# --------------------------------------------------------------------------- the bounds
+
+def test_cheap_bounds_hold_on_the_random_recipe():
+    """Every pair sharing no vertex, at every coarse state of a random-recipe pattern: the
+    cheap lower bound never exceeds the exact distance; the motion bound is the largest
+    relative displacement over the 16 vertex pairs (brute force)."""
+    from rffqm_nlp import collisions as col
+    pat = random_recipe(22)
+    geo = _Geometry(pat)
+    states = col._States(geo, 1.0, np.linspace(0.0, 2.5, 11))
+    p, q = np.triu_indices(pat.N * pat.M, 1)
+    keep = geo.non_adjacent(p, q)
+    p, q = p[keep], q[keep]
+    tight = 0
+    for k in range(11):
+        s = np.full(len(p), k)
+        lb, d = col._lower_bound(states, s, p, q), col._distance(states, s, p, q)
+        assert np.all(lb <= d + 1e-12)
+        tight += np.sum(lb > 0.5 * d)
+    assert tight > 0.5 * 11 * len(p)              # and it is not a trivial bound
+    a, b = np.full(len(p), 3), np.full(len(p), 4)
+    dP = states.Q[4, p] - states.Q[3, p]
+    dQ = states.Q[4, q] - states.Q[3, q]
+    brute = np.linalg.norm(dQ[:, None, :, :] - dP[:, :, None, :], axis=3).max(axis=(1, 2))
+    np.testing.assert_allclose(col._motion(states, a, b, p, q), brute, rtol=1e-12)
+
+
+@pytest.mark.parametrize("clearance", [0.0, 0.05])
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(clearance):
+    """The broad phase (one tree per coarse state, float32 tables) keeps every pair that a
+    float64 scan of all pairs finds within the margin at either end of a coarse step and
+    not cleared by its sphere gaps and motion bound, with a motion bound at least as
+    large."""
+    from rffqm_nlp import collisions as col
+    pat = random_recipe(29)
+    geo = _Geometry(pat)
+    K = 13
+    states = col._States(geo, 1.0, np.linspace(0.0, 2.4, K))
+    margin = geo.radius.max() + clearance
+    rows, m = col._coarse_rows(geo, states, K, margin, clearance)
+    got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
+    p, q = np.triu_indices(pat.N * pat.M, 1)
+    keep = geo.non_adjacent(p, q)
+    p, q = p[keep], q[keep]
+    C, Q, r = states.C, states.Q, geo.radius
+    expected = 0
+    for k in range(K - 1):
+        g0 = np.linalg.norm(C[k, p] - C[k, q], axis=1) - r[p] - r[q]
+        g1 = np.linalg.norm(C[k + 1, p] - C[k + 1, q], axis=1) - r[p] - r[q]
+        dC = C[k + 1] - C[k]
+        spin = np.linalg.norm(Q[k + 1] - Q[k] - dC[:, None], axis=2).max(axis=1)
+        mk = 2.0 * (np.linalg.norm(dC[p] - dC[q], axis=1) + spin[p] + spin[q])
+        need = (np.minimum(g0, g1) <= margin) & ((g0 + g1 - mk) / 2 <= clearance)
+        for a, b, bound in zip(p[need], q[need], mk[need]):
+            assert got[(k, k + 1, a, b)] >= bound
+        expected += need.sum()
+    assert expected > 0 and len(rows) >= expected
