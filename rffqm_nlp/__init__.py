@@ -17,10 +17,12 @@ from .pattern import Pattern
 from .marching import fold, march
 from .design import DesignProblem, SolveOptions, load_design
 from .results import DesignResult, Fit, SolveStats
+from .collisions import CollisionReport, collisions
 
-_SUBMODULES = ("numpy_model", "marching", "vertex", "lengths", "surfaces",
-               "shape", "design", "transcription", "results", "files", "foldfile", "export",
-               "viz", "cli", "sweeps")
+_SUBMODULES = ("numpy_model", "marching", "vertex", "boundary", "pattern", "backend", "errors",
+               "lengths", "surfaces", "meshes", "shape", "curvature", "design", "transcription",
+               "reduced", "clearance", "results", "files", "foldfile", "export", "viz", "view",
+               "cli", "sweeps")
 
 
 def __getattr__(name: str):
@@ -31,7 +33,8 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
 
 
-__all__ = ["BoundaryData", "BoundaryDataError", "DesignProblem", "DesignResult", "Fit",
+__all__ = ["BoundaryData", "BoundaryDataError", "CollisionReport", "DesignProblem", "DesignResult", "Fit",
            "InfeasibleDesign", "InputError", "MarchingError", "Pattern", "RffqmError",
-           "SolveOptions", "SolveStats", "SolverFailed", "SurfaceError", "fold", "load_design",
+           "SolveOptions", "SolveStats", "SolverFailed", "SurfaceError", "collisions", "fold",
+           "load_design",
            "march", "miura_boundary", "perturb_angles", "sweep", *_SUBMODULES]
