@@ -30,7 +30,13 @@ Method.
   (a rigid motion's displacement is affine on a panel, so its extreme is at a vertex;
   the 16 vertex pairs are compared, after a coarser bound, the centres' relative
   displacement plus each panel's largest vertex displacement about its centre, has
-  failed to certify the step). Distances are first bounded from below cheaply (centre
+  failed to certify the step), or SAFETY times the largest displacement of a vertex of
+  one panel in the frame of the other (origin at its corner a, axes along its edge
+  a -> b and its normal), whichever is smaller: in its own frame a panel is still and
+  the other moves rigidly, so the distance changes by at most that. The frame bound is
+  the one that certifies panels hinged across a very thin panel (side-length LP
+  patterns): they stay close while their far corners move a lot, but in one another's
+  frame they hardly move. Distances are first bounded from below cheaply (centre
   distance minus radii, how far one panel lies on one side of the other's plane, and the
   gap between the two panels' projections on the line through their centres); the exact
   distance is computed only where that bound does not certify the step, and only an
@@ -41,8 +47,9 @@ Method.
   ``first_omega`` is the earliest sample in contact, so it lies within ``tol`` after the
   true first contact.
 * Guarantee and its assumptions: no contact is missed provided that within one step the
-  path of every vertex relative to another is at most SAFETY times its chord (smooth
-  motion on short steps) and no two panels farther apart than the margin at both ends of
+  path of every vertex relative to another, and of every vertex in the frame of another
+  panel, is at most SAFETY times its chord (smooth motion on short steps; the second,
+  added with the frame bound, is of the same kind as the first) and no two panels farther apart than the margin at both ends of
   a coarse step pass through each other within it; a pair whose distance dips below the
   clearance only between two samples less than ``tol`` apart may be missed (a near miss
   shorter than ``tol`` in omega).
@@ -407,11 +414,29 @@ class _States:
 
 
 def _motion(st: _States, ia, ib, p, q) -> np.ndarray:
-    """The largest displacement (n,) of a vertex of panel q relative to a vertex of panel
-    p from state ia to state ib (all (n,)), over the 16 vertex pairs."""
-    dP = _at(st.Q, ib, p) - _at(st.Q, ia, p)                        # (n, 4, 3)
-    dQ = _at(st.Q, ib, q) - _at(st.Q, ia, q)
-    return _most(_norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+    """Bounds (n,) on how far the distance of panels p and q can change from state ia to
+    state ib (all (n,)): the smallest of the largest displacement of a vertex of q
+    relative to a vertex of p (16 vertex pairs) and the largest displacement of a vertex
+    of one panel in the frame of the other (4 vertices, both ways)."""
+    Pa, Pb, Qa, Qb = (_at(st.Q, s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
+    dP, dQ = Pb - Pa, Qb - Qa                                        # (n, 4, 3)
+    m = _most(_norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+    for A, B, C, D, x in ((Pa, Pb, Qa, Qb, p), (Qa, Qb, Pa, Pb, q)):   # C, D in A's frame
+        La, Lb = _local(A, _at(st.n, ia, x), C), _local(B, _at(st.n, ib, x), D)
+        m = np.minimum(m, _most(_norm(Lb - La)))
+    return m
+
+
+def _local(A: np.ndarray, n: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 4, 3) of the points B (n, 4, 3) in the frame of the panel with
+    corners A (n, 4, 3) and unit normal n (n, 3): origin at corner a, axes along a -> b,
+    the normal's cross product with it, and the normal."""
+    e1 = A[:, 1] - A[:, 0]
+    e1 = e1 - _dot(e1, n)[:, None] * n
+    e1 = e1 / _norm(e1)[:, None]
+    e2 = _cross(n, e1)
+    r = B - A[:, :1]
+    return np.stack([_dot(r, e1[:, None]), _dot(r, e2[:, None]), _dot(r, n[:, None])], axis=-1)
 
 
 def _lower_bound(st: _States, s, p, q) -> np.ndarray:
