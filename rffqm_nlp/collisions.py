@@ -328,7 +328,9 @@ def _flat_overlaps(geo: _Geometry) -> list[PanelPair]:
     """Pairs of panels whose interiors overlap in the flat pattern (omega = 0)."""
     X = geo.pat.X.reshape(-1, 3)[:, :2]
     C = _centroid(X[geo.corners])
-    pq = cKDTree(C).query_pairs(2 * geo.radius.max(), output_type="ndarray")
+    pq = cKDTree(C).query_pairs(2 * geo.radius.max(), output_type="ndarray").reshape(-1, 2)
+    d = C[pq[:, 0]] - C[pq[:, 1]]                                   # circumscribed discs
+    pq = pq[np.hypot(d[:, 0], d[:, 1]) <= geo.radius[pq[:, 0]] + geo.radius[pq[:, 1]]]
     if pq.size == 0:
         return []
     ring = geo.corners[:, [0, 2, 3, 1]]                             # a, c, d, b around
