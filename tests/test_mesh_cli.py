@@ -4,7 +4,6 @@ the design, its files, and one line with exit status 2 for every bad shape file.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np

@@ -260,7 +260,8 @@ def test_shape_fit_of_the_surface_itself_and_of_an_offset():
     fit = sh.shape_fit(on, surface)
     assert max(fit["rms_surface"], fit["hausdorff"], fit["rms_surface_vertices"],
                fit["hausdorff_vertices"]) < 1e-9
-    assert fit["coverage"] == pytest.approx(sh.lattice_area(on[::2, ::2]) / sh.surface_area(surface))
+    coverage = sh.lattice_area(on[::2, ::2]) / sh.surface_area(surface)
+    assert fit["coverage"] == pytest.approx(coverage)
     assert 0.99 < fit["coverage"] < 1.0  # the chords of a convex cap cut it short
     # the coarse lattice on the surface, the fine vertices in between lifted off it
     off = on + 0.02 * surface.normal(u[:, None], v[None, :])
