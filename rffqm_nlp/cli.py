@@ -154,7 +154,8 @@ def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
 def _target_for_render(result: "DesignResult", target=None, trust: bool = False):
     """The target surface as a mesh in the pattern frame: ``target``, the result's
     ``target_grid`` (kept when no config rebuilds the target), or the surface rebuilt from
-    the saved configuration; its lattice points when that fails (the target names code and
+    the saved configuration (a :class:`~rffqm_nlp.meshes.Mesh` made from a triangle mesh
+    gives that mesh); its lattice points when that fails (the target names code and
     ``trust`` is not given)."""
     import trimesh
 
