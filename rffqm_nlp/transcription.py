@@ -480,10 +480,9 @@ def simultaneous(setup: Setup) -> NLP:
     the root of a tree of partial means (P, see :class:`_MeanTree`), so the Jacobian colours
     in a few tens of forward sweeps whatever the size. Solve it with ``mu_strategy =
     adaptive`` (or a small ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1
-    the barrier terms (hundreds of logs against a loss of about 0.05) pull this
-    infeasible-path method towards square panels and long sides (the central point at mu =
-    0.1 has all angles in [1.53, 1.61] and sides 8x the spacing), where it loses feasibility
-    and never returns.
+    the barrier terms (hundreds of logs against a much smaller loss) pull this
+    infeasible-path method towards square panels and long sides (measured: docs/solvers.md,
+    "Cold-start barrier"), where it loses feasibility and never returns.
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
