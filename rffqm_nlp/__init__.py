@@ -33,8 +33,8 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'rffqm_nlp' has no attribute {name!r}")
 
 
-__all__ = ["BoundaryData", "BoundaryDataError", "CollisionReport", "DesignProblem", "DesignResult", "Fit",
-           "InfeasibleDesign", "InputError", "MarchingError", "Pattern", "RffqmError",
-           "SolveOptions", "SolveStats", "SolverFailed", "SurfaceError", "collisions", "fold",
-           "load_design",
-           "march", "miura_boundary", "perturb_angles", "sweep", *_SUBMODULES]
+__all__ = ["BoundaryData", "BoundaryDataError", "CollisionReport", "DesignProblem",
+           "DesignResult", "Fit", "InfeasibleDesign", "InputError", "MarchingError", "Pattern",
+           "RffqmError", "SolveOptions", "SolveStats", "SolverFailed", "SurfaceError",
+           "collisions", "fold", "load_design", "march", "miura_boundary", "perturb_angles",
+           "sweep", *_SUBMODULES]

@@ -498,8 +498,9 @@ def fold_cmd(
                                          "omega."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="JSON file to write "
                                        "(default: print to stdout)."),
-    aligned: bool = typer.Option(False, "--aligned", help="Move the states rigidly onto the target (the "
-                                 "frame of result.folded) instead of the pattern frame."),
+    aligned: bool = typer.Option(False, "--aligned", help="Move the states rigidly onto the "
+                                 "target (the frame of result.folded) instead of the pattern "
+                                 "frame."),
 ) -> None:
     """Folded vertices of a saved design at one omega (--omega) or K omegas (--frames).
 

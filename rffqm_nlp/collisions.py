@@ -49,10 +49,10 @@ Method.
 * Guarantee and its assumptions: no contact is missed provided that within one step the
   path of every vertex relative to another, and of every vertex in the frame of another
   panel, is at most SAFETY times its chord (smooth motion on short steps; the second,
-  added with the frame bound, is of the same kind as the first) and no two panels farther apart than the margin at both ends of
-  a coarse step pass through each other within it; a pair whose distance dips below the
-  clearance only between two samples less than ``tol`` apart may be missed (a near miss
-  shorter than ``tol`` in omega).
+  added with the frame bound, is of the same kind as the first) and no two panels farther
+  apart than the margin at both ends of a coarse step pass through each other within it; a
+  pair whose distance dips below the clearance only between two samples less than ``tol``
+  apart may be missed (a near miss shorter than ``tol`` in omega).
 * Flat overlaps: at omega = 0 every panel is a convex quadrilateral in the plane; two
   panels overlap when their interiors do (a separating-axis test on the eight edge
   normals, touching along an edge or at a corner is not an overlap).

@@ -99,9 +99,9 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
     The key frame is the flat crease pattern (2-D coordinates, assignments and fold angles
     in degrees at ``omega``, FOLD's signs: valley positive). ``frames`` (a count K of
     states from 0 to omega, or an array of omegas) adds ``file_frames``: each state's folded
-    3-D coordinates, assignments and fold angles, and its ``rffqm:omega``. The design data are stored under the ``rffqm:`` prefix:
-    ``rffqm:omega``, ``rffqm:pattern`` (:meth:`Pattern.to_dict`) and every key of
-    ``metadata`` as ``rffqm:<key>``.
+    3-D coordinates, assignments and fold angles, and its ``rffqm:omega``. The design data are
+    stored under the ``rffqm:`` prefix: ``rffqm:omega``, ``rffqm:pattern``
+    (:meth:`Pattern.to_dict`) and every key of ``metadata`` as ``rffqm:<key>``.
     """
     if not isinstance(pat, Pattern):
         raise InputError(f"fold_dict expects a Pattern, got {type(pat).__name__}")

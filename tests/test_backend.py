@@ -4,7 +4,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from rffqm_nlp import backend, shape, surfaces, vertex
+from rffqm_nlp import shape, surfaces, vertex
 from rffqm_nlp.backend import CASADI, NUMPY, is_casadi, math_for
 
 

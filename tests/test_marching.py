@@ -128,7 +128,8 @@ def test_pattern_panel_angles_and_flat_geometry_agree():
 
     def angle(p, q, r):
         u, v = q - p, r - p
-        return np.arccos(np.sum(u * v, -1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1))
+        norms = np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1)
+        return np.arccos(np.sum(u * v, -1) / norms)
 
     measured = np.stack([angle(a, c, b), angle(b, a, d), angle(c, d, a), angle(d, b, c)], -1)
     np.testing.assert_allclose(measured, pat.panel_angles, atol=1e-12)
