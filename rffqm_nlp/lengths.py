@@ -27,8 +27,8 @@ those linear maps. Two ways to choose ell over the same feasible set
     non-positive number. Not convex in s: IPOPT returns a local minimiser, started at the
     max-min solution.
 
-:func:`solve_side_length_nlp` is :func:`side_length_nlp` returning the whole
-:class:`SideLengthSolution`; :func:`length_spread` summarises a pattern's sides.
+:func:`side_length_nlp` returns a :class:`SideLengthSolution` (the boundary data and
+what IPOPT reported); :func:`length_spread` summarises a pattern's sides.
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ from scipy.optimize import linprog
 
 from .boundary import BoundaryData
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
+from .files import Key, check_value
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
 
@@ -49,6 +50,8 @@ from .vertex import panel_sides
 OBJECTIVES: tuple[str, ...] = ("max_min", "uniform")
 #: Default lower bound of :func:`side_length_nlp` on every side, as a fraction of the mean.
 DEFAULT_MIN_LENGTH = 1e-3
+_MIN_LENGTH = Key("number", low=0, high=1, low_open=True, high_open=True,
+                  hint="(a fraction of the mean side; 1 would force all sides equal)")
 
 
 # --------------------------------------------------------------------------- linear maps
@@ -157,8 +160,9 @@ class SideLengthSolution:
 
 def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
                     min_length: float | None = None, *, tol: float = 1e-10,
-                    max_iter: int = 3000, verbose: bool = False) -> BoundaryData:
-    """Boundary data with the angles of ``bd`` and optimised side lengths (mean side 1).
+                    max_iter: int = 3000, verbose: bool = False) -> SideLengthSolution:
+    """Optimised side lengths (mean side 1) for the angles of ``bd``: the solution's
+    ``boundary`` is ``bd`` with those lengths.
 
     ``objective`` is one of :data:`OBJECTIVES` (see the module docstring). ``min_length``
     (default :data:`DEFAULT_MIN_LENGTH`) is the lower bound on every side as a fraction of
@@ -168,15 +172,13 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
     :class:`MarchingError` when the angles themselves fail the marching checks and
     :class:`InputError` on invalid arguments.
     """
-    return solve_side_length_nlp(bd, objective, min_length, tol=tol, max_iter=max_iter,
-                                 verbose=verbose).boundary
-
-
-def solve_side_length_nlp(bd: BoundaryData, objective: str = "max_min",
-                          min_length: float | None = None, *, tol: float = 1e-10,
-                          max_iter: int = 3000, verbose: bool = False) -> SideLengthSolution:
-    """:func:`side_length_nlp` returning the whole :class:`SideLengthSolution`."""
-    min_length = _check_nlp_arguments(bd, objective, min_length, tol, max_iter)
+    if not isinstance(bd, BoundaryData):
+        raise InputError(f"side_length_nlp expects BoundaryData, got {type(bd).__name__}")
+    objective = check_value(objective, Key("choice", choices=OBJECTIVES), "objective")
+    min_length = check_value(DEFAULT_MIN_LENGTH if min_length is None else min_length,
+                             _MIN_LENGTH, "min_length")
+    tol = check_value(tol, Key("number", low=0, low_open=True), "tol")
+    max_iter = check_value(max_iter, Key("whole", low=1), "max_iter")
     A = length_maps(bd).all_sides
     mean_row = A.mean(axis=0)
     if not np.any(np.abs(mean_row) > 0):
@@ -190,31 +192,6 @@ def solve_side_length_nlp(bd: BoundaryData, objective: str = "max_min",
         ell, value, stats = _uniform(A, mean_row, min_length, ell, s0, opts)
     floor = (min_length if objective == "uniform" else t_star) * (1 - 1e-6)
     return _solution(bd, A, ell, float(value), floor, stats)
-
-
-def _check_nlp_arguments(bd: Any, objective: Any, min_length: Any, tol: Any,
-                         max_iter: Any) -> float:
-    """Raise :class:`InputError` on an invalid argument; the min_length to use."""
-    if not isinstance(bd, BoundaryData):
-        raise InputError(f"side_length_nlp expects BoundaryData, got {type(bd).__name__}")
-    if objective not in OBJECTIVES:
-        raise InputError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
-    if min_length is None:
-        min_length = DEFAULT_MIN_LENGTH
-    if not (_is_number(min_length) and np.isfinite(min_length) and 0 < min_length < 1):
-        raise InputError(
-            f"min_length is a fraction of the mean side and must be a number in (0, 1), got "
-            f"{min_length!r} (1 would force all sides equal)")
-    if not (_is_number(tol) and np.isfinite(tol) and tol > 0):
-        raise InputError(f"tol must be a finite positive number, got {tol!r}")
-    if not (_is_number(max_iter) and np.isfinite(max_iter) and max_iter >= 1
-            and int(max_iter) == max_iter):
-        raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
-    return float(min_length)
-
-
-def _is_number(x: Any) -> bool:
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
 
 
 def _check_feasible(t_star: float, min_length: float) -> None:

@@ -55,8 +55,8 @@ def lengths(bd: rq.BoundaryData, method: str, t_star: float | None) -> rq.Bounda
     if method == "LP":
         return side_length_lp(bd)
     if method == "uniform>=t*/2":
-        return side_length_nlp(bd, "uniform", min_length=0.5 * t_star)
-    return side_length_nlp(bd, method)
+        return side_length_nlp(bd, "uniform", min_length=0.5 * t_star).boundary
+    return side_length_nlp(bd, method).boundary
 
 
 def normalised(pat: rq.Pattern) -> rq.Pattern:

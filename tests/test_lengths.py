@@ -7,8 +7,7 @@ from scipy.optimize import linprog
 
 import rffqm_nlp as rq
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
-from rffqm_nlp.lengths import (length_maps, length_spread, side_length_lp, side_length_nlp,
-                               solve_side_length_nlp)
+from rffqm_nlp.lengths import length_maps, length_spread, side_length_lp, side_length_nlp
 from rffqm_nlp.marching import march, pattern_function
 
 SEEDS = (0, 1, 2)
@@ -100,7 +99,7 @@ def solved():
         bd = fig_random(seed)
         out[seed] = {"bd": bd, "lp": march(side_length_lp(bd))}
         for obj in OBJECTIVES:
-            out[seed][obj] = march(side_length_nlp(bd, obj))
+            out[seed][obj] = march(side_length_nlp(bd, obj).boundary)
     return out
 
 
@@ -145,7 +144,7 @@ def test_uniform_lowers_log_variance(solved, seed):
 def test_max_min_certified_by_linprog(solved, seed):
     bd = solved[seed]["bd"]
     t_lp = linprog_max_min(sides_matrix_by_marching(bd))
-    sol = solve_side_length_nlp(bd, "max_min")
+    sol = side_length_nlp(bd, "max_min")
     assert sol.objective == pytest.approx(t_lp, abs=1e-6)
     sides = solved[seed]["max_min"].side_lengths
     assert sides.min() / sides.mean() == pytest.approx(t_lp, abs=1e-6)
@@ -156,7 +155,7 @@ def test_max_min_certified_by_linprog(solved, seed):
 @pytest.mark.parametrize("a, b", [(1.0, 1.0), (1.0, 2.5)])
 def test_uniform_on_miura_gives_equal_sides(layout, a, b):
     bd = rq.miura_boundary(6, 8, a=a, b=b, layout=layout)
-    pat = march(side_length_nlp(bd, "uniform"))
+    pat = march(side_length_nlp(bd, "uniform").boundary)
     np.testing.assert_allclose(pat.side_lengths, 1.0, atol=1e-8)
     # with a = b the input lengths themselves were already optimal (up to scale)
     if a == b:
@@ -164,7 +163,7 @@ def test_uniform_on_miura_gives_equal_sides(layout, a, b):
 
 
 def test_max_min_on_miura_is_one():
-    sol = solve_side_length_nlp(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
+    sol = side_length_nlp(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
     assert sol.objective == pytest.approx(1.0, abs=1e-8)
 
 
@@ -195,7 +194,7 @@ def test_min_length_is_respected(solved):
     bd = solved[1]["bd"]
     t = length_spread(solved[1]["max_min"].lh, solved[1]["max_min"].lv)["min_over_mean"]
     floor = 0.9 * t
-    pat = march(side_length_nlp(bd, "uniform", min_length=floor))
+    pat = march(side_length_nlp(bd, "uniform", min_length=floor).boundary)
     assert pat.side_lengths.min() >= floor * (1 - 1e-6)
 
 
@@ -212,7 +211,7 @@ def test_solver_failure_carries_ipopt_status(solved):
     {"min_length": True}, {"tol": 0.0}, {"tol": "small"}, {"max_iter": 0}, {"max_iter": 2.5},
     {"max_iter": "many"}])
 def test_invalid_arguments(kwargs):
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=f"^{next(iter(kwargs))} must be"):
         side_length_nlp(rq.miura_boundary(2, 2), **kwargs)
 
 
