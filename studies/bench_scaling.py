@@ -3,7 +3,8 @@
 A bundled target (``--target``, default the sphere cap; its target file's options, with
 IPOPT and the exact Hessian unless ``--hessian`` says otherwise) at n x n panels, run to
 IPOPT's tolerance (stop_rms=None) or, with ``--stop-rms``, until a re-marched iterate fits
-that well (the target files' 0.9% is what the README's main job uses). Two methods per
+that well (``--stop-rms 0.009``: ``common.STOP_RMS``, the target files' own value until
+2026-12-01). Two methods per
 size: the sequential and the simultaneous transcription with IPOPT, or, with ``--solver
 levenberg-marquardt``, IPOPT and Levenberg-Marquardt on the marching manifold, both on the
 simultaneous NLP. ``--simultaneous-only`` sizes run the second method only. Each run is
