@@ -141,7 +141,9 @@ class _Geometry:
 
     Panels are numbered p = (i-1) M + (j-1); ``corners`` (P, 4) holds the flat vertex
     indices of a, b, c, d; ``radius`` (P,) the distance from a panel's centroid to its
-    farthest corner (constant: panels are rigid).
+    farthest corner (constant: panels are rigid); ``big`` the panels whose radius exceeds
+    ``rho`` (about the 90th percentile: the broad phase queries them apart), ``is_big``
+    (P,) its mask.
     """
 
     def __init__(self, pat: Pattern):
@@ -154,6 +156,9 @@ class _Geometry:
         Q = X[self.corners]
         self.radius = np.linalg.norm(Q - Q.mean(axis=1, keepdims=True), axis=2).max(axis=1)
         self.scale = float(np.ptp(X, axis=0).max()) or 1.0
+        self.rho = float(np.quantile(self.radius, 0.9)) * (1 + 1e-6)
+        self.is_big = self.radius > self.rho
+        self.big = np.flatnonzero(self.is_big)
 
     def states(self, omegas: np.ndarray) -> np.ndarray:
         """Folded vertex positions (K, (N+1)(M+1), 3) at the omegas (K,)."""
@@ -190,14 +195,31 @@ def _near(geo: _Geometry, T: np.ndarray, reach: float) -> tuple[np.ndarray, ...]
     """The pairs p < q (n,) sharing no vertex whose bounding spheres are at most ``reach``
     apart, from a panel table T (:func:`_table`), and those gaps g (n,) (:func:`_gap`,
     in T's precision; the tree's radius allows for float32 rounding)."""
-    r = 2 * geo.radius.max() + reach + _slack(geo, T[:3])
-    pq = cKDTree(T[:3].T).query_pairs(r, output_type="ndarray").reshape(-1, 2)
-    pq = np.ascontiguousarray(pq.T)                                  # (2, n)
+    pq = _candidates(geo, T[:3].T, reach)                            # (2, n)
     A, B = T.take(pq[0], axis=1, mode="clip"), T.take(pq[1], axis=1, mode="clip")  # (6, n)
     g = _gap(A, B)
     keep = np.flatnonzero((np.maximum(np.abs(A[4] - B[4]), np.abs(A[5] - B[5])) >= 2)
                           & (g <= reach))
     return pq[0, keep], pq[1, keep], g[keep]
+
+
+def _candidates(geo: _Geometry, X: np.ndarray, reach: float) -> np.ndarray:
+    """Pairs (2, n), p < q, each once, among them every pair of panels with centroids X
+    (P, 3) whose bounding spheres are at most ``reach`` apart: one tree query for the
+    pairs of panels no larger than ``geo.rho`` (a radius that need not cover the largest
+    panel), one for the pairs with a larger panel."""
+    slack = _slack(geo, X)
+    tree = cKDTree(X)
+    pq = tree.query_pairs(2 * geo.rho + reach + slack, output_type="ndarray").reshape(-1, 2)
+    if geo.big.size == 0:
+        return np.ascontiguousarray(pq.T)
+    pq = pq[~(geo.is_big[pq[:, 0]] | geo.is_big[pq[:, 1]])]
+    ij = cKDTree(X[geo.big]).sparse_distance_matrix(
+        tree, 2 * geo.radius.max() + reach + slack, output_type="ndarray")
+    b, j = geo.big[ij["i"]], ij["j"]
+    ok = (b != j) & (~geo.is_big[j] | (b < j))                      # big-big pairs once
+    b, j = b[ok], j[ok]
+    return np.concatenate([pq.T, np.stack([np.minimum(b, j), np.maximum(b, j)])], axis=1)
 
 
 def _slack(geo: _Geometry, C: np.ndarray) -> float:
