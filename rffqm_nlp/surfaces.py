@@ -16,8 +16,8 @@ Conventions:
 
 Built-ins (:func:`names`, :func:`get`) validate their parameters and domain on construction,
 users add their own with :class:`Custom`, and a design file's ``[target]`` table names one
-of either (:func:`from_config`, :func:`load`, :meth:`Surface.to_config`). A designer's mesh or
-point cloud becomes a surface with :class:`Mesh` (module ``rffqm_nlp.meshes``).
+of either (:func:`from_config`, :meth:`Surface.to_config`; a design file is read by
+:func:`rffqm_nlp.design.load_design`). A designer's mesh or point cloud becomes a surface with :class:`Mesh` (module ``rffqm_nlp.meshes``).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from scipy.spatial import ConvexHull, cKDTree
 
 from . import backend
 from .errors import InputError, SurfaceError, one_line
-from .files import Key, check_table, check_value, describe_value, read_toml
+from .files import Key, check_table, check_value, describe_value
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
@@ -162,7 +162,8 @@ class Surface:
     # -- samples, lattices, meshes ------------------------------------------------------
     def grid_uv(self, n_u: int, n_v: int) -> tuple[np.ndarray, np.ndarray]:
         """(u (n_u,), v (n_v,)): uniform parameter values over the whole domain."""
-        n_u, n_v = _positive_int(n_u, "n_u", 2), _positive_int(n_v, "n_v", 2)
+        n_u, n_v = (_checked_value(n, Key("whole", low=2), k) for n, k in (
+            (n_u, "n_u"), (n_v, "n_v")))
         (u0, u1), (v0, v1) = self.domain
         return np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v)
 
@@ -196,10 +197,10 @@ class Surface:
         directions) so that the mean distance between lattice neighbours along i is s_i and
         along j is s_j.
         """
-        N, M = _positive_int(N, "N", 1), _positive_int(M, "M", 1)
+        N, M = (_checked_value(n, Key("whole", low=1), k) for n, k in ((N, "N"), (M, "M")))
         if spacing is None:
             return self.grid_uv(N + 1, M + 1)
-        s_i, s_j = _check_spacing(spacing)
+        s_i, s_j = _checked_value(spacing, _SPACING, "spacing")
         (u0, u1), (v0, v1) = self.domain
         uc, vc, a_max, b_max = (u0 + u1) / 2, (v0 + v1) / 2, (u1 - u0) / 2, (v1 - v0) / 2
 
@@ -540,8 +541,7 @@ class _Builtin(Surface):
 
 def _positive(params: dict, *keys: str) -> None:
     for key in keys:
-        if params[key] <= 0:
-            raise SurfaceError(f"{key} must be positive, got {params[key]}")
+        _checked_value(params[key], Key("number", low=0, low_open=True), key)
 
 
 def _inside_open(dom: Domain, limit: float, what: str) -> None:
@@ -745,7 +745,8 @@ def get(name: str, domain: Any = None, **params: float) -> Surface:
         valid = ", ".join(spec.defaults) or "none"
         raise SurfaceError(f"unknown parameter(s) {', '.join(unknown)} for surface {name!r}; "
                            f"valid parameters: {valid} (and domain)")
-    values = {k: _real(params.get(k, default), k) for k, default in spec.defaults.items()}
+    values = {k: _checked_value(params.get(k, default), Key("number"), k)
+              for k, default in spec.defaults.items()}
     return _Builtin(name, spec, values, domain)
 
 
@@ -759,6 +760,8 @@ def _spec(name: str) -> _Spec:
 #: ``domain = [[u0, u1], [v0, v1]]`` of a [target] table.
 DOMAIN_KEY = Key("list", length=2, item=Key("list", length=2, item=Key("number")),
                  hint="([[u0, u1], [v0, v1]])")
+#: ``spacing = (s_i, s_j)`` of :meth:`Surface.lattice`.
+_SPACING = Key("list", length=2, item=Key("number", low=0, low_open=True), hint="(s_i, s_j)")
 #: The keys of a [target] table with python = ...
 PYTHON_KEYS = {"python": Key("string", required=True),
                "domain": Key("list", length=2, item=DOMAIN_KEY.item, required=True,
@@ -855,33 +858,11 @@ def _checked_value(value: Any, key: Key, name: str) -> Any:
         raise SurfaceError(str(exc)) from None
 
 
-def load(path: str | Path, trust: bool = False) -> Surface:
-    """The surface of the ``[target]`` table of a TOML design file (``python = ...`` relative
-    to the file's folder, run only with ``trust``)."""
-    data = read_toml(path, "design file", SurfaceError)
-    if not isinstance(data.get("target"), dict):
-        raise SurfaceError(f"{path} has no [target] table")
-    return from_config(data["target"], root=Path(path).parent, trust=trust)
-
-
 # -- validation helpers -------------------------------------------------------------------
 
 
-def _real(x: Any, what: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise SurfaceError(f"{what} must be a real number, got {x!r}")
-    if not math.isfinite(float(x)):
-        raise SurfaceError(f"{what} must be finite, got {x!r}")
-    return float(x)
-
-
 def _check_domain(domain: Any) -> Domain:
-    try:
-        (u0, u1), (v0, v1) = domain
-    except (TypeError, ValueError):
-        raise SurfaceError(f"domain must be ((u0, u1), (v0, v1)), got {domain!r}") from None
-    u0, u1, v0, v1 = (_real(x, f"domain bound {n}") for x, n in
-                      zip((u0, u1, v0, v1), ("u0", "u1", "v0", "v1")))
+    (u0, u1), (v0, v1) = _checked_value(domain, DOMAIN_KEY, "domain")
     for name, a, b in (("u", u0, u1), ("v", v0, v1)):
         if not a < b:
             raise SurfaceError(f"the {name} range ({a}, {b}) of the domain is empty or "
@@ -891,23 +872,6 @@ def _check_domain(domain: Any) -> Domain:
 
 def _domain_list(dom: Domain) -> list[list[float]]:
     return [list(dom[0]), list(dom[1])]
-
-
-def _positive_int(n: Any, what: str, least: int) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < least:
-        raise SurfaceError(f"{what} must be an integer >= {least}, got {n!r}")
-    return int(n)
-
-
-def _check_spacing(spacing: Any) -> tuple[float, float]:
-    try:
-        s_i, s_j = spacing
-    except (TypeError, ValueError):
-        raise SurfaceError(f"spacing must be (s_i, s_j), got {spacing!r}") from None
-    s_i, s_j = _real(s_i, "spacing s_i"), _real(s_j, "spacing s_j")
-    if s_i <= 0 or s_j <= 0:
-        raise SurfaceError(f"spacing must be positive, got ({s_i}, {s_j})")
-    return s_i, s_j
 
 
 def _solve_extent(residual: Callable[[float], float], most: float) -> float:
