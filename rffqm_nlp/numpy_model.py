@@ -334,17 +334,3 @@ def _rotate(R, E):
     """Component-major R E: (3, K, ...) for R (K, ..., 3, 3) and flat E (3, ...), E_z = 0."""
     return np.einsum("k...ij,j...->ik...", R[..., :2], E[:2])
 
-
-def _rotations_both_ways(pat: Pattern, omega) -> tuple[np.ndarray, np.ndarray]:
-    """Both formulas of eq:defGrads at the interior panels i, j > 1 (for tests).
-
-    Returns (R^{(i-1)j} R_{t1}(gamma_1^{ij}), R^{i(j-1)} R_{t2}(-gamma_2^{ij})), each
-    (K, N-1, M-1, 3, 3): they agree on a compatible pattern.
-    """
-    w, _ = _omegas(omega)
-    R = _panel_rotations(pat, w)
-    _, k2 = _fold_tangent_factors(pat)
-    _, phi_v = _edge_directions(pat.alpha, pat.beta)
-    S, C = np.sin(w / 2)[:, None, None], _cos_half(w)[:, None, None]
-    right = _crease_rotation(_unit(phi_v[1:, 1:-1]), -k2[1:-1, 1:-1], S, C)
-    return R[:, 1:, 1:], R[:, 1:, :-1] @ right

@@ -7,6 +7,7 @@ libgl1-mesa-dri``); :func:`rendering_available` says whether rendering works her
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -20,8 +21,8 @@ from .errors import InputError
 from .export import COLORS, draw_creases
 from .files import atomic_path
 from .foldfile import faces_vertices
-from .marching import check_omega, fold
-from .pattern import Pattern
+from .marching import fold
+from .pattern import Pattern, check_omega
 
 _KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _HISTORY_KEYS = ("iter", "objective", "inf_pr")
@@ -136,7 +137,8 @@ def _pyvista():
         # No display: go straight to EGL (VTK falls back to OSMesa) instead of trying X.
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     try:
-        import imageio.v3  # noqa: F401  (checked here so the message names the extra)
+        if importlib.util.find_spec("imageio") is None:  # checked here: the message names the extra
+            raise ImportError("No module named 'imageio'")
         import pyvista as pv
     except ImportError as exc:
         raise ImportError("3-D rendering needs pyvista and imageio: install the 'viz' extra, "

@@ -33,7 +33,8 @@ def _mu1(alpha: float, beta: float, sigma: float) -> float:
     return _mu2(alpha, math.pi - beta, -sigma)
 
 
-def _unit(theta: float) -> np.ndarray:
+def unit(theta: float) -> np.ndarray:
+    """The in-plane unit vector (cos theta, sin theta, 0)."""
     return np.array([math.cos(theta), math.sin(theta), 0.0])
 
 
@@ -86,19 +87,20 @@ def march_loop(bd: BoundaryData) -> Pattern:
             # accumulated edge directions
             if p == 0:
                 theta = 0.0 if q == 0 else theta_cd - aa
-                X[0, q + 1] = X[0, q] + l_ac * _unit(theta)
+                X[0, q + 1] = X[0, q] + l_ac * unit(theta)
             else:
                 theta = theta_bd[q]
             theta_ab = theta + aa
             theta_cd = theta + math.pi - ac
             theta_bd[q] = math.remainder(theta_ab + math.pi + ab, TWO_PI)
-            X[p + 1, q] = X[p, q] + l_ab * _unit(theta_ab)
-            X[p + 1, q + 1] = X[p + 1, q] + l_bd * _unit(theta_bd[q])
+            X[p + 1, q] = X[p, q] + l_ab * unit(theta_ab)
+            X[p + 1, q + 1] = X[p + 1, q] + l_bd * unit(theta_bd[q])
     return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
 
 
-def _rot(t: np.ndarray, gamma: float) -> np.ndarray:
-    """R_t(gamma) of eq:localRots with t_perp = -(t.e2) e1 + (t.e1) e2."""
+def rot_about(t: np.ndarray, gamma: float) -> np.ndarray:
+    """R_t(gamma) of eq:localRots for an in-plane unit tangent t, with
+    t_perp = -(t.e2) e1 + (t.e1) e2 (docs/paper.md s.3)."""
     tp = np.array([-t[1], t[0], 0.0])
     e3 = np.array([0.0, 0.0, 1.0])
     tt = np.outer(t, t)
@@ -129,9 +131,9 @@ def fold_loop(pattern: Pattern, omega: float) -> np.ndarray:
             if p == 0 and q == 0:                        # eq:defGrads
                 R[p][q] = np.eye(3)
             elif p == 0:
-                R[p][q] = R[p][q - 1] @ _rot(t2, -g2[p][q])
+                R[p][q] = R[p][q - 1] @ rot_about(t2, -g2[p][q])
             else:
-                R[p][q] = R[p - 1][q] @ _rot(t1, g1[p][q])
+                R[p][q] = R[p - 1][q] @ rot_about(t1, g1[p][q])
             ya = Y[p, q]                                 # eq:finalCalc
             for v in ((p + 1, q), (p, q + 1), (p + 1, q + 1)):
                 Y[v] = ya + R[p][q] @ (X[v] - xa)

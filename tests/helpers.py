@@ -6,20 +6,6 @@ import numpy as np
 from hypothesis import assume, strategies as st
 
 
-def rot_about(t: np.ndarray, gamma: float) -> np.ndarray:
-    """R_t(gamma) of eq:localRots for an in-plane unit tangent t (docs/paper.md s.3)."""
-    t = np.asarray(t, dtype=float)
-    e3 = np.array([0.0, 0.0, 1.0])
-    tp = np.array([-t[1], t[0], 0.0])
-    P = np.eye(3) - np.outer(t, t)
-    W = np.outer(e3, tp) - np.outer(tp, e3)
-    return np.outer(t, t) + np.cos(gamma) * P + np.sin(gamma) * W
-
-
-def unit(theta: float) -> np.ndarray:
-    return np.array([np.cos(theta), np.sin(theta), 0.0])
-
-
 def panel_distances(P: np.ndarray) -> np.ndarray:
     """Four sides and two diagonals of every panel of a vertex lattice, (6, N, M)."""
     a, b, c, d = P[:-1, :-1], P[1:, :-1], P[:-1, 1:], P[1:, 1:]

@@ -11,7 +11,8 @@ from rffqm_nlp import numpy_model
 from rffqm_nlp import vertex as vx
 from rffqm_nlp.lengths import side_length_lp
 
-from helpers import admissible_vertex, panel_distances, panel_rotations, rot_about, unit
+from forward_oracle import rot_about, unit
+from helpers import admissible_vertex, panel_distances, panel_rotations
 
 OMEGAS = [0.0, 1e-9, 0.3, -1.1, 2.5, np.pi - 1e-9, np.pi, -np.pi]
 

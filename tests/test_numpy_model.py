@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from rffqm_nlp import BoundaryData, MarchingError, miura_boundary, perturb_angles
 from rffqm_nlp.errors import InputError
-from rffqm_nlp.numpy_model import (_rotations_both_ways, fold, fold_angles, gamma1_bar,
-                                   gamma2_bar, march, mu1, mu2)
+from rffqm_nlp import numpy_model as nm
+from rffqm_nlp.numpy_model import fold, fold_angles, gamma1_bar, gamma2_bar, march, mu1, mu2
 
 from forward_oracle import fold_loop, march_loop
 
@@ -75,6 +75,19 @@ def panel_distances(P):
 
 def unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def rotations_both_ways(pat, omega):
+    """Both formulas of eq:defGrads at the interior panels i, j > 1, from numpy_model's
+    pieces: (R^{(i-1)j} R_{t1}(gamma_1^{ij}), R^{i(j-1)} R_{t2}(-gamma_2^{ij})), each
+    (K, N-1, M-1, 3, 3); they agree on a compatible pattern."""
+    w, _ = nm._omegas(omega)
+    R = nm._panel_rotations(pat, w)
+    _, k2 = nm._fold_tangent_factors(pat)
+    _, phi_v = nm._edge_directions(pat.alpha, pat.beta)
+    S, C = np.sin(w / 2)[:, None, None], nm._cos_half(w)[:, None, None]
+    right = nm._crease_rotation(nm._unit(phi_v[1:, 1:-1]), -k2[1:-1, 1:-1], S, C)
+    return R[:, 1:, 1:], R[:, 1:, :-1] @ right
 
 
 # --------------------------------------------------------------------------- 1, 2: one vertex
@@ -144,7 +157,7 @@ def test_marched_vertices_are_admissible(pat):
 @given(patterns, st.lists(omegas, min_size=1, max_size=3))
 def test_panel_compatibility(pat, ws):
     assume(pat is not None and pat.N > 1 and pat.M > 1)
-    from_below, from_left = _rotations_both_ways(pat, ws)
+    from_below, from_left = rotations_both_ways(pat, ws)
     assert np.abs(from_below - from_left).max() < 1e-12
     gh, _ = fold_angles(pat, np.array(ws))
     s = pat.sigma[1:-1, 1:-1]
