@@ -47,7 +47,7 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
     sys.path.insert(0, str(ROOT))
 
 from common import (RESULTS, TARGETS, Run, add_smoke, fmt, run_child,  # noqa: E402
-                    smoke_dir, solve_in_child, target_problem)
+                    smoke_dir, solve_in_child, target_problem, write_table)
 from rffqm_nlp import numpy_model  # noqa: E402
 
 #: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
@@ -189,9 +189,7 @@ def main() -> None:
              f"{threads[0]} thread(s), one solve each; cProfile inflates them):", "",
              *profile_table(profiles), ""]
     text = "\n".join(lines)
-    print(text)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_table(args.out, text)
 
 
 if __name__ == "__main__":

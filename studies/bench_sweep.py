@@ -24,7 +24,7 @@ import shutil
 import time
 from pathlib import Path
 
-from common import RESULTS, ROOT, Run, add_smoke, smoke_dir
+from common import RESULTS, ROOT, Run, add_smoke, smoke_dir, write_table
 from rffqm_nlp import sweeps
 
 RADII = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)
@@ -120,9 +120,7 @@ def main() -> None:
               f"{same_iterations} of {int(both.sum())} designs solved by both took the same "
               f"iterations; largest relative RMS difference {rel.max():.1e}."]
     text = "\n".join(lines) + "\n"
-    args.results.mkdir(parents=True, exist_ok=True)
-    (args.results / "bench_sweep.md").write_text(text)
-    print(text)
+    write_table(args.results / "bench_sweep.md", text)
 
 
 if __name__ == "__main__":

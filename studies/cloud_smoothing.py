@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import rffqm_nlp as rq
-from common import RESULTS, Run, add_smoke, smoke_dir
+from common import RESULTS, Run, add_smoke, smoke_dir, write_table
 from rffqm_nlp import meshes
 
 SURFACES = ["sphere_cap", "hyperboloid", "quarter_vase", "saddle", "torus_patch",
@@ -62,9 +62,7 @@ def main() -> None:
                          f"| {dev:.2f} | {elapsed:.2f} |")
     lines[1:1] = ["", f"- {run.header()}"]
     text = "\n".join(lines) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "cloud_smoothing.md").write_text(text)
-    print(text)
+    write_table(args.out / "cloud_smoothing.md", text)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """What the studies share: the bundled target problems, one design solved in a child process
 (its time and peak memory its own), the machine/date line of the tables, the table cell
-formatter and the ``--smoke`` run (tiny sizes, output to a temporary folder).
+formatter, writing and printing a table, and the ``--smoke`` run (tiny sizes, output to a temporary folder).
 
 A study imports it as ``from common import ...`` (the studies folder is the script's path).
 ``python studies/common.py --child '<json>'`` solves one design and prints its row as JSON
@@ -131,6 +131,13 @@ class Run:
                 f"{np.__version__}, CasADi {ca.__version__}; load average (1 min) "
                 f"{self.load0:.1f} at start, {os.getloadavg()[0]:.1f} at end; whole run "
                 f"{self.elapsed():.0f} s")
+
+
+def write_table(path: Path, text: str) -> None:
+    """Write a study's Markdown ``text`` to ``path`` (its folder made if missing) and print it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    print(text)
 
 
 def fmt(value: float | None, spec: str = ".3g", none: str = "-") -> str:

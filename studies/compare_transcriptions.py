@@ -18,7 +18,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem
+from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem, write_table
 from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.errors import RffqmError
 from rffqm_nlp.sweeps import one_thread
@@ -88,9 +88,7 @@ def main() -> None:
         "|" + "---|" * 14,
     ]
     text = "\n".join(header + rows) + "\n"
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(text)
+    write_table(args.out, text)
     print(f"wrote {args.out}")
 
 

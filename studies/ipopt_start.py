@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, run_child, smoke_dir,
-                    solve_in_child, target_problem)
+                    solve_in_child, target_problem, write_table)
 
 CONFIGS = {"IPOPT defaults": {}, "bound_mult_init_val 0.01": {"bound_mult_init_val": 0.01},
            "bound_mult_init_method mu-based": {"bound_mult_init_method": "mu-based"}}
@@ -138,9 +138,7 @@ def main() -> None:
         "## Totals over the three targets", "",
         "| panels | options | factorisations | wall [s] | speed-up vs defaults |",
         "|---|---|---|---|---|", *total_rows, ""])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(text)
+    write_table(args.out, text)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import rffqm_nlp as rq
-from common import RESULTS, Run, add_smoke, smoke_dir
+from common import RESULTS, Run, add_smoke, smoke_dir, write_table
 from rffqm_nlp import meshes
 
 CASES = [("cylinder", ((-2.0, 2.0), (-1.5, 1.5))),
@@ -115,9 +115,7 @@ def main() -> None:
             lines.append(f"| {name} | {label} | {elapsed:.3f} | {mean:.3f} | {worst:.2f} | "
                          f"{flipped} | {cov:.1%} |")
     text = "\n".join(lines) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "mesh_parametrization.md").write_text(text)
-    print(text)
+    write_table(args.out / "mesh_parametrization.md", text)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ import tempfile
 from pathlib import Path
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, fmt, smoke_dir,
-                    solve_in_child)
+                    solve_in_child, write_table)
 from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, SolveOptions
 
 LM = "levenberg-marquardt"  # in the Hessian column: that solver (then IPOPT, exact, if needed)
@@ -142,9 +142,7 @@ def main() -> None:
         "CPU: user and system seconds of the whole subprocess", "",
         "| threads | iterations | wall [s] | linear solves [s] | CPU user [s] | "
         "CPU system [s] | status |", "|---|---|---|---|---|---|---|", *thread_rows, ""])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(text)
+    write_table(args.out, text)
 
 
 if __name__ == "__main__":
