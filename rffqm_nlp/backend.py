@@ -22,6 +22,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+#: A value the formulas written once for both take and return: a Python or NumPy number, a
+#: NumPy array, or a CasADi SX/MX symbol or DM matrix.
+Scalar = Any
 #: The CasADi matrix types: symbols (SX, MX) and numeric matrices (DM).
 CASADI_TYPES = (ca.SX, ca.MX, ca.DM)
 

@@ -32,6 +32,7 @@ from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
                      raise_for_ipopt)
 from .files import (Key, check_table, check_value, describe_value, key_name, read_toml,
                     unknown_key)
+from .pattern import Pattern
 from .results import DesignResult, Fit, SolveStats
 
 PI = np.pi
@@ -781,7 +782,7 @@ def _gigabytes(size: float) -> str:
     return f"{mantissa}e{int(exponent)}"
 
 
-def collision_fields(pattern, omega: float) -> dict[str, Any]:
+def collision_fields(pattern: Pattern, omega: float) -> dict[str, Any]:
     """Fit's ``collision_free`` and ``first_contact_omega`` of ``pattern`` folding from 0 to
     ``omega`` (:func:`rffqm_nlp.collisions.collisions`)."""
     report = collisions(pattern, omega)

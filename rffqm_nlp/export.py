@@ -11,6 +11,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,11 @@ from .files import atomic_path
 from .foldfile import CREATOR, edge_assignments, edges_vertices, faces_vertices, write_fold
 from .marching import fold
 from .pattern import Pattern, check_omega
+
+if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
+    import trimesh
+    from matplotlib.axes import Axes
+    from matplotlib.lines import Line2D
 
 #: Stroke colours of the 2-D writers, as Origami Simulator expects on SVG import.
 COLORS: dict[str, str] = {"M": "#ff0000", "V": "#0000ff", "B": "#000000"}
@@ -38,7 +44,7 @@ def crease_segments(pat: Pattern, omega: float) -> list[tuple[np.ndarray, np.nda
             for (a, b), k in zip(edges_vertices(pat.N, pat.M), kinds)]
 
 
-def draw_creases(ax, pat: Pattern, omega: float, linewidth: float = 1.0) -> list:
+def draw_creases(ax: Axes, pat: Pattern, omega: float, linewidth: float = 1.0) -> list[Line2D]:
     """Draw every edge of the flat pattern on a matplotlib ``ax``: one Line2D per edge,
     mountain red, valley blue, boundary black; equal aspect, no axes. Returns the lines."""
     lines = []
@@ -114,7 +120,7 @@ def triangles(N: int, M: int) -> np.ndarray:
     return np.stack([q[:, [0, 1, 2]], q[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
 
 
-def folded_mesh(pat: Pattern, omega: float):
+def folded_mesh(pat: Pattern, omega: float) -> trimesh.Trimesh:
     """The folded state at ``omega`` as a ``trimesh.Trimesh`` ((N+1)(M+1) vertices, 2NM
     triangles, vertex order of the FOLD file)."""
     import trimesh

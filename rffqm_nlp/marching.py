@@ -11,15 +11,20 @@ flat edge vectors. Vertex arrays are (N+1, M+1) matrices, vertex (i, j) at [i-1,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
 from . import vertex as vx
+from .backend import Scalar
 from .boundary import BoundaryData
 from .errors import InputError, MarchingError
 from .pattern import Pattern, check_omega
+
+#: A quaternion's 4 components (w, x, y, z), each a CasADi matrix (or a number).
+Quaternion = Sequence[Scalar]
 
 PI = np.pi
 #: The second check fails when | |mu_abc| - 1 | is at most this.
@@ -97,7 +102,7 @@ def pattern_function(N: int, M: int) -> ca.Function:
         ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "Xx", "Xy"])
 
 
-def edge_directions(alpha, beta):
+def edge_directions(alpha: ca.MX, beta: ca.MX) -> ca.MX:
     """Directions of the horizontal edges (N+1 x M+1; the last column is auxiliary).
 
     Accumulated sector angles (docs/paper.md s.4): along the left column the direction turns by
@@ -129,7 +134,7 @@ def _sign_products(signs, axis: int):
     return 1 - 2 * ca.fmod(count, 2)
 
 
-def fold_multipliers(alpha, beta, sigma):
+def fold_multipliers(alpha: ca.MX, beta: ca.MX, sigma: ca.MX) -> tuple[ca.MX, ca.MX]:
     """Factors kh (N+1 x M+1), kv (N+1 x M+1) with tan(gamma/2) = k tan(omega/2).
 
     kh[i, j] belongs to gamma1 of vertex (i+1, j+1) (the horizontal edge to its right),
@@ -145,7 +150,8 @@ def fold_multipliers(alpha, beta, sigma):
     return kh, kv
 
 
-def crease_quaternion(theta, k, c, s, sign=1.0, k_den=1.0):
+def crease_quaternion(theta: Scalar, k: Scalar, c: Scalar, s: Scalar, sign: float = 1.0,
+                      k_den: Scalar = 1.0) -> Quaternion:
     """Unit quaternion of R_t(sign * gamma), t = (cos theta, sin theta, 0),
     tan(gamma/2) = (k / k_den) s / c.
 
@@ -169,7 +175,7 @@ def panel_quaternions_function(N: int, M: int) -> ca.Function:
     return ca.Function("panel_quaternions", [alpha, beta, sigma, lh, lv, omega], quat)
 
 
-def qmul(p, q):
+def qmul(p: Quaternion, q: Quaternion) -> Quaternion:
     """Quaternion product p q, componentwise on (w, x, y, z) sequences of matrices."""
     pw, px, py, pz = p
     qw, qx, qy, qz = q
@@ -236,7 +242,8 @@ def folded_function(N: int, M: int) -> ca.Function:
                        [*pattern.name_in(), "omega"], ["Yx", "Yy", "Yz"])
 
 
-def crease_quaternions(alpha, beta, sigma, theta_h, omega):
+def crease_quaternions(alpha: ca.MX, beta: ca.MX, sigma: ca.MX, theta_h: ca.MX,
+                       omega: Scalar) -> tuple[Quaternion, Quaternion]:
     """Rotation quaternions of the creases the kinematics march crosses (eq:defGrads).
 
     Returns (qv, qh): qv for the vertical creases of the bottom row, R_{t2}(-gamma2^{1j}),
@@ -252,7 +259,8 @@ def crease_quaternions(alpha, beta, sigma, theta_h, omega):
     return qv, qh
 
 
-def rotated_edges(quat, alpha, theta_h, lh, lv):
+def rotated_edges(quat: Quaternion, alpha: ca.MX, theta_h: ca.MX, lh: ca.MX,
+                  lv: ca.MX) -> tuple[tuple[ca.MX, ...], tuple[ca.MX, ...]]:
     """Folded edge vectors: the bottom edges by their panel's rotation, the vertical edges by
     the panel on their right (the last column by the panel on its left).
 
@@ -328,7 +336,7 @@ def march(bd: BoundaryData) -> Pattern:
     return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
 
 
-def fold(pat: Pattern, omega) -> np.ndarray:
+def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
     """Folded vertex positions: (N+1, M+1, 3) for scalar omega, (K, N+1, M+1, 3) for K values."""
     if not isinstance(pat, Pattern):
         raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")

@@ -18,6 +18,7 @@ d = (i+1, j+1).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .boundary import BoundaryData
 from .errors import MarchingError
@@ -31,7 +32,7 @@ _CHECKS = ("first", "second", "final")
 
 # --------------------------------------------------------------------------- one vertex
 
-def mu2(alpha, beta, sigma):
+def mu2(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed; the
     arguments in :func:`rffqm_nlp.vertex.mu2`'s order."""
     return _mu2_cs(np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta), sigma)
@@ -42,7 +43,7 @@ def _mu2_cs(ca, sa, cb, sb, sigma):
     return (-sigma + ca * cb + sa * sb) / (cb - sigma * ca)
 
 
-def mu1(alpha, beta, sigma):
+def mu1(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """mu_1^{-sigma}(alpha, beta) = mu_2^{-sigma}(alpha, pi - beta) (eq:foldAngMult).
 
     ``sigma`` is the vertex sign; the result equals 1 / mu2(alpha, beta, sigma).
@@ -50,13 +51,15 @@ def mu1(alpha, beta, sigma):
     return mu2(alpha, np.pi - beta, -sigma)
 
 
-def gamma2_bar(omega, alpha, beta, sigma):
+def gamma2_bar(omega: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
+               sigma: ArrayLike) -> np.ndarray:
     """gamma_2bar^sigma(omega; alpha, beta) of Theorem 2.1 in the form
     tan(gamma/2) = -tan(omega/2) / mu2 (docs/paper.md s.2), omega in [-pi, pi]."""
     return _half_angle_map(omega, -1.0 / mu2(alpha, beta, sigma))
 
 
-def gamma1_bar(omega, alpha, beta, sigma):
+def gamma1_bar(omega: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
+               sigma: ArrayLike) -> np.ndarray:
     """gamma_1bar^{-sigma}(omega; alpha, beta) (eq:inverse), the inverse of
     :func:`gamma2_bar`: tan(gamma/2) = -tan(omega/2) / mu1."""
     return _half_angle_map(omega, -1.0 / mu1(alpha, beta, sigma))
@@ -216,7 +219,7 @@ def _assemble(Eh, Ev):
 
 # --------------------------------------------------------------------------- kinematics
 
-def fold(pat: Pattern, omega) -> np.ndarray:
+def fold(pat: Pattern, omega: ArrayLike) -> np.ndarray:
     """Folded vertex positions (eq:creaseInputs .. eq:finalCalc) with R^{11} = I, y^{11} = 0.
 
     ``omega`` (gamma_1 of vertex (1, 1)) is a scalar in [-pi, pi] -> (N+1, M+1, 3), or an
@@ -238,7 +241,7 @@ def fold(pat: Pattern, omega) -> np.ndarray:
     return Y[0] if scalar else Y
 
 
-def fold_angles(pat: Pattern, omega) -> tuple[np.ndarray, np.ndarray]:
+def fold_angles(pat: Pattern, omega: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Fold angles of all edges (eq:foldInitial .. eq:foldFinal); gamma > 0 is a valley.
 
     Returns gamma_h (N+1, M) with gamma_1^{ij} on the edge (i, j) -> (i, j+1) and gamma_v

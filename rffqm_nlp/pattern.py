@@ -4,6 +4,7 @@ and the fold parameter omega's validator, :func:`check_omega`."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from .boundary import BoundaryData
 from .errors import InputError
 
 
-def check_omega(omega, name: str = "omega") -> np.ndarray:
+def check_omega(omega: Any, name: str = "omega") -> np.ndarray:
     """The fold parameter(s) ``omega`` validated: a float array of shape () or (K,).
 
     ``omega`` is gamma_1 of vertex (1, 1) (eq:foldParams): a finite number, or a 1-D

@@ -7,7 +7,7 @@ import json
 import os
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from .curvature import Curvature
 from .errors import InputError, RffqmError
 from .files import jsonable, write_json
 from .pattern import Pattern
+
+if TYPE_CHECKING:  # plotly is imported by the view, on use
+    import plotly.graph_objects
 
 FORMAT = "rffqm-nlp design result"
 VERSION = 2
@@ -193,7 +196,7 @@ class DesignResult:
 
         return repr_html(self)
 
-    def view(self, frames: int = 24):
+    def view(self, frames: int = 24) -> plotly.graph_objects.Figure:
         """The interactive view as a plotly Figure (:func:`rffqm_nlp.view.figure`)."""
         from .view import figure
 

@@ -17,7 +17,8 @@ Conventions:
 Built-ins (:func:`names`, :func:`get`) validate their parameters and domain on construction,
 users add their own with :class:`Custom`, and a design file's ``[target]`` table names one
 of either (:func:`from_config`, :meth:`Surface.to_config`; a design file is read by
-:func:`rffqm_nlp.design.load_design`). A designer's mesh or point cloud becomes a surface with :class:`Mesh` (module ``rffqm_nlp.meshes``).
+:func:`rffqm_nlp.design.load_design`). A designer's mesh or point cloud becomes a surface
+with :class:`Mesh` (module ``rffqm_nlp.meshes``).
 """
 
 from __future__ import annotations

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Callable
+from collections.abc import Callable, Sequence
 
 import casadi as ca
 import numpy as np
 
 from . import numpy_model, shape
 from . import vertex as vx
+from .backend import Scalar
 from .boundary import BoundaryData
 from .errors import InputError, MarchingError
 from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
@@ -136,7 +137,7 @@ def _hess_lag(nlp: NLP, hessian) -> ca.Function:
                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
 
-def rotation_from_quaternion(q):
+def rotation_from_quaternion(q: Sequence[Scalar]) -> ca.MX:
     """Rotation matrix of the (not necessarily unit) quaternion q = (w, x, y, z)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     n = w * w + x * x + y * y + z * z
@@ -155,8 +156,8 @@ def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
-def loss_residuals(r, rotation, translation, target: np.ndarray, weights: dict[str, float],
-                   spacing: float):
+def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar, target: np.ndarray,
+                   weights: dict[str, float], spacing: float) -> ca.MX:
     """Residuals of the loss for the coarse lattice r(i, j) = y^{(2i)(2j)} of the folded
     vertices, r = (rx, ry, rz) ((N+1) x (M+1) each).
 
@@ -228,7 +229,7 @@ class Setup:
         ang = self.reference.angles
         return np.sign(vx.mv_multiplier(ang[:, 0], ang[:, 1], self.reference.sigma))
 
-    def boundary_mv(self, alpha, beta) -> tuple:
+    def boundary_mv(self, alpha: ca.MX, beta: ca.MX) -> tuple[ca.MX, np.ndarray, np.ndarray]:
         """The boundary MV assignment held: sign * mv_multiplier >= mu_margin at every
         boundary vertex (alpha, beta: N+1+M vectors, left then bottom). With the mu
         constraints this holds the M/V of every crease (no counterexample in 4,400 random
@@ -261,7 +262,7 @@ def _objective_residuals(setup: Setup, r, rigid, boundary_vec) -> ca.MX:
     return ca.vertcat(*out)
 
 
-def smoothness_residuals(delta, N: int, M: int):
+def smoothness_residuals(delta: Scalar, N: int, M: int) -> Scalar:
     """Second differences of a boundary perturbation along the left and the bottom edge.
 
     ``delta`` follows :meth:`BoundaryData.to_vector` (alphas, betas, then l_left, l_bottom;

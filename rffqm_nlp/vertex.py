@@ -16,17 +16,17 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .backend import is_casadi, math_for
+from .backend import Scalar, is_casadi, math_for
 
 
-def mu2(alpha, beta, sigma):
+def mu2(alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """Fold-angle multiplier mu2^sigma(alpha, beta) (eq:foldAngMult), half-angle form."""
     num, den = mu2_terms(alpha, beta, sigma)
     with np.errstate(divide="ignore", invalid="ignore"):
         return num / den
 
 
-def mu2_terms(alpha, beta, sigma):
+def mu2_terms(alpha: Scalar, beta: Scalar, sigma: Scalar) -> tuple[Scalar, Scalar]:
     """Numerator and denominator of :func:`mu2`: (cos h-, cos h+) at sigma = -1 and
     (-sin h-, sin h+) at sigma = +1, h-+ = (alpha -+ beta)/2.
 
@@ -40,14 +40,14 @@ def mu2_terms(alpha, beta, sigma):
             op.where(sigma < 0, op.cos(h_plus), op.sin(h_plus)))
 
 
-def mu1(alpha, beta, sigma):
+def mu1(alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """Fold-angle multiplier mu1^{-sigma}(alpha, beta) = 1 / mu2^sigma(alpha, beta)."""
     num, den = mu2_terms(alpha, beta, sigma)
     with np.errstate(divide="ignore", invalid="ignore"):
         return den / num
 
 
-def mv_multiplier(alpha, beta, sigma: np.ndarray):
+def mv_multiplier(alpha: Scalar, beta: Scalar, sigma: np.ndarray) -> Scalar:
     """The fold multiplier that vanishes where sigma leaves MV(alpha, beta) (Theorem 2.1).
 
     mu2^{+1} = -sin(h-)/sin(h+) at sigma = +1 vertices (zero at alpha = beta) and
@@ -65,7 +65,7 @@ def mv_multiplier(alpha, beta, sigma: np.ndarray):
     return (plus * num + (1 - plus) * den) / (plus * den + (1 - plus) * num)
 
 
-def fold_by_multiplier(omega, mu):
+def fold_by_multiplier(omega: Scalar, mu: Scalar) -> Scalar:
     """The group element g with tan(g/2) = -tan(omega/2)/mu, on omega in [-pi, pi].
 
     Written with atan2 so omega = +-pi (folded flat) is exact: g = -sign(mu) omega there.
@@ -75,23 +75,24 @@ def fold_by_multiplier(omega, mu):
     return 2 * op.atan2(-op.sin(half) * _sign(mu, op), op.fabs(mu) * op.cos(half))
 
 
-def gamma2_bar(omega, alpha, beta, sigma):
+def gamma2_bar(omega: Scalar, alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """gamma2 as a function of gamma1 = omega at a vertex (Theorem 2.1)."""
     return fold_by_multiplier(omega, mu2(alpha, beta, sigma))
 
 
-def gamma1_bar(omega, alpha, beta, sigma):
+def gamma1_bar(omega: Scalar, alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """Inverse of :func:`gamma2_bar` (eq:inverse): gamma1 as a function of gamma2 = omega."""
     return fold_by_multiplier(omega, mu1(alpha, beta, sigma))
 
 
-def fold_angles(omega, alpha, beta, sigma):
+def fold_angles(omega: Scalar, alpha: Scalar, beta: Scalar,
+                sigma: Scalar) -> tuple[Scalar, Scalar, Scalar, Scalar]:
     """(gamma1, gamma2, gamma3, gamma4) at a vertex (eq:foldParams)."""
     g2 = gamma2_bar(omega, alpha, beta, sigma)
     return omega, g2, -sigma * omega, sigma * g2
 
 
-def design_d(alpha_d, mu_abc):
+def design_d(alpha_d: Scalar, mu_abc: Scalar) -> tuple[Scalar, Scalar]:
     """The design formula (eq:SuperParam) in half-angle form: (beta_d, sigma_d).
 
     sigma_d = -sign(mu^2 - 1). Solving mu2^{sigma_d}(alpha_d, beta_d) = mu with
@@ -107,13 +108,15 @@ def design_d(alpha_d, mu_abc):
     return 2 * op.atan(v), sigma_d
 
 
-def panel_sides(alpha_a, alpha_b, alpha_c, l_ab, l_ac):
+def panel_sides(alpha_a: Scalar, alpha_b: Scalar, alpha_c: Scalar, l_ab: Scalar,
+                l_ac: Scalar) -> tuple[Scalar, Scalar]:
     """(l_cd, l_bd) from the panel's angles and its left and bottom sides (eq:getSides)."""
     s, cd, bd = _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
     return cd / s, bd / s
 
 
-def panel_side_residuals(alpha_a, alpha_b, alpha_c, l_ab, l_ac, l_cd, l_bd):
+def panel_side_residuals(alpha_a: Scalar, alpha_b: Scalar, alpha_c: Scalar, l_ab: Scalar,
+                         l_ac: Scalar, l_cd: Scalar, l_bd: Scalar) -> tuple[Scalar, Scalar]:
     """eq:getSides as residuals multiplied through by its denominator
     s = sin(alpha_a + alpha_b + alpha_c) = -sin(alpha_d): s l_cd - (...), s l_bd - (...).
 

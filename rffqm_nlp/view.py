@@ -48,6 +48,7 @@ from .files import write_text
 from .foldfile import edge_assignments
 
 if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html_
+    from .pattern import Pattern
     from .results import DesignResult
 
 #: Significant digits (of the largest coordinate) kept in the page.
@@ -111,7 +112,7 @@ def _runs(mask: np.ndarray, ids: np.ndarray) -> list[np.ndarray]:
     return [ids[g[0]:g[-1] + 2] for g in groups if g.size]
 
 
-def crease_paths(pat, omega: float) -> dict[str, np.ndarray]:
+def crease_paths(pat: Pattern, omega: float) -> dict[str, np.ndarray]:
     """For each kind "M", "V", "B": the vertex ids (row-major in (N+1, M+1)) of its creases
     as polylines, -1 between two polylines; consecutive edges of a kind along a lattice line
     form one polyline."""

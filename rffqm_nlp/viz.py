@@ -14,6 +14,7 @@ import sys
 from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,13 @@ from .files import atomic_path
 from .foldfile import faces_vertices
 from .marching import fold
 from .pattern import Pattern, check_omega
+
+if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
+    import trimesh
+    from matplotlib.axes import Axes
+
+    from .collisions import CollisionReport
+    from .curvature import Curvature
 
 _KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _HISTORY_KEYS = ("iter", "objective", "inf_pr")
@@ -39,7 +47,8 @@ assert img.shape == (24, 32, 3) and img.std() > 0, "blank image"
 
 
 # --------------------------------------------------------------------------- matplotlib
-def plot_crease_pattern(pat: Pattern, omega: float, ax=None, legend: bool = True):
+def plot_crease_pattern(pat: Pattern, omega: float, ax: Axes | None = None,
+                        legend: bool = True) -> Axes:
     """Draw the flat crease pattern (mountain red, valley blue, boundary black) on ``ax``
     (a new figure when None); the assignments are those at ``omega``. Returns the Axes."""
     if ax is None:
@@ -89,7 +98,7 @@ def plot_convergence(history: Mapping[str, Sequence[float]], path: str | os.Path
     return Path(path)
 
 
-def plot_curvature(curvature, path: str | os.PathLike) -> Path:
+def plot_curvature(curvature: Curvature, path: str | os.PathLike) -> Path:
     """The curvature maps of a :class:`~rffqm_nlp.curvature.Curvature` to ``path``: a 2 x 2
     figure, design K and target K above, design H and target H below, one colour scale per
     row (shared by design and target; the H scale symmetric about 0 when H changes sign),
@@ -221,8 +230,10 @@ def _mark_contacts(p, mesh, contacts, M: int) -> None:
         p.add_mesh(cells, color="red", show_edges=True, edge_color="darkred", line_width=4)
 
 
-def render_png(path: str | os.PathLike, pat: Pattern, omega: float, target=None,
-               size: tuple[int, int] = (800, 600), contacts=None) -> Path:
+def render_png(path: str | os.PathLike, pat: Pattern, omega: float,
+               target: trimesh.Trimesh | np.ndarray | None = None,
+               size: tuple[int, int] = (800, 600),
+               contacts: CollisionReport | None = None) -> Path:
     """Render the folded state at ``omega`` to a PNG of ``size`` (width, height) pixels.
 
     With a ``target`` mesh (a trimesh.Trimesh in the frame of :func:`marching.fold`) the
