@@ -36,7 +36,7 @@ from .boundary import LAYOUTS, miura_boundary, perturb_angles
 from .errors import InputError, RffqmError, one_line
 from .export import EXPORTERS
 from .files import check_out_dir, jsonable, replace_folder, write_json
-from .pattern import check_omega
+from .pattern import check_frames, check_omega, motion_omegas
 
 if TYPE_CHECKING:
     from .design import DesignProblem, SolveOptions
@@ -48,8 +48,6 @@ console = Console(stderr=True)
 
 #: Folding states stored in pattern.fold and drawn in folding.gif by ``design``.
 FRAMES = 24
-#: Resolution (per direction) of the target mesh drawn in render.png.
-TARGET_MESH = 60
 #: The interactive view (rffqm_nlp.view) and the curvature maps that ``design`` writes.
 VIEW_FILE = "view.html"
 CURVATURE_FILE = "curvature.png"
@@ -152,30 +150,19 @@ def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
 
 
 def _target_for_render(result: "DesignResult", target=None, trust: bool = False):
-    """The target surface as a mesh in the pattern frame: ``target``, the result's
-    ``target_grid`` (kept when no config rebuilds the target), or the surface rebuilt from
-    the saved configuration (a :class:`~rffqm_nlp.meshes.Mesh` made from a triangle mesh
-    gives that mesh); its lattice points when that fails (the target names code and
-    ``trust`` is not given)."""
+    """The target of :func:`rffqm_nlp.results.target_mesh` moved into the pattern frame, or
+    the target lattice points (with a warning) when it cannot be rebuilt (the target names
+    code and ``trust`` is not given)."""
     import trimesh
 
-    from . import surfaces
+    from .results import target_mesh
 
-    if target is None and result.target_grid is not None:  # kept: no config rebuilds it
-        grid = result.target_grid
-        return trimesh.Trimesh(vertices=_pattern_frame(grid.reshape(-1, 3), result),
-                               faces=surfaces.grid_faces(*grid.shape[:2]), process=False)
-    if target is None:
-        try:
-            target = surfaces.from_config(result.problem["target"], trust=trust)
-        except (RffqmError, KeyError, TypeError) as exc:
-            warn(f"cannot rebuild the target surface ({one_line(exc)}); drawing the target "
-                 "lattice points instead")
-            return _pattern_frame(result.target_points.reshape(-1, 3), result)
-    if isinstance(target, surfaces.Mesh) and target.mesh is not None:
-        mesh = target.mesh  # the shape itself, not its spline
-    else:
-        mesh = surfaces.Surface.mesh(target, TARGET_MESH, TARGET_MESH)
+    try:
+        mesh = target_mesh(result, target, trust)
+    except RffqmError as exc:
+        warn(f"cannot rebuild the target surface ({one_line(exc)}); drawing the target "
+             "lattice points instead")
+        return _pattern_frame(result.target_points.reshape(-1, 3), result)
     return trimesh.Trimesh(vertices=_pattern_frame(mesh.vertices, result), faces=mesh.faces,
                            process=False)
 
@@ -207,8 +194,8 @@ def _contacts(result: "DesignResult"):
 
 
 def _check_frames(frames: int) -> None:
-    if frames < 2:
-        raise InputError(f"--frames must be at least 2, got {frames}")
+    """--frames of render and view: flat and folded flat at least."""
+    check_frames(frames, minimum=2, name="--frames")
 
 
 # --------------------------------------------------------------------------- design
@@ -320,7 +307,7 @@ def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem"
     options = _export_options(result)
     for fmt in DESIGN_FORMATS:
         EXPORTERS[fmt].write(folder / EXPORTERS[fmt].filename, pat, omega, **options)
-    view.write_html(result, folder / VIEW_FILE, frames=FRAMES)
+    view.write_html(result, folder / VIEW_FILE, frames=FRAMES, target=problem.target)
     viz.plot_convergence(result.stats.history, folder / "convergence.png")
     if result.curvature is not None:
         viz.plot_curvature(result.curvature, folder / CURVATURE_FILE)
@@ -514,9 +501,7 @@ def fold_cmd(
             raise InputError("give exactly one of --omega W or --frames K")
         result = _load_result(result_dir)
         if frames is not None:
-            if frames < 1:
-                raise InputError(f"--frames must be at least 1, got {frames}")
-            om = np.linspace(0.0, result.omega, frames)
+            om = motion_omegas(result.omega, frames, name="--frames")
         else:
             om = float(check_omega(omega, "--omega"))
         Y = marching.fold(result.pattern, om)
@@ -693,7 +678,7 @@ def march(
             write_json(tmp / "pattern.json", pat)
             write_json(tmp / "folded.json", {"omega": omega, "Y": Y})
             if frames:
-                om = np.linspace(0.0, omega, frames)
+                om = motion_omegas(omega, frames)
                 write_json(tmp / "frames.json", {"omega": om, "Y": marching.fold(pat, om)})
     spread = length_spread(pat.lh, pat.lv)
     Console().print(quantity_table(f"{rows} x {cols} panels, omega = {omega:g}", [

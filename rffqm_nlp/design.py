@@ -310,13 +310,13 @@ class DesignProblem:
         """
         N, M = self.N, self.M
         unit = miura_boundary(2 * N, 2 * M, 1.0, 1.0, self.alpha0, self.layout)
-        coarse = numpy_model.fold(numpy_model.march(unit), self.omega0)[::2, ::2]
+        coarse = shape.coarse_grain(numpy_model.fold(numpy_model.march(unit), self.omega0))
         target_points = self.target.lattice(N, M)
         s_i, s_j = surfaces.mean_neighbour_distances(coarse)
         t_i, t_j = surfaces.mean_neighbour_distances(target_points)
         bd = unit.with_lengths(np.concatenate([unit.l_left * t_i / s_i,
                                                unit.l_bottom * t_j / s_j]))
-        coarse = numpy_model.fold(numpy_model.march(bd), self.omega0)[::2, ::2]
+        coarse = shape.coarse_grain(numpy_model.fold(numpy_model.march(bd), self.omega0))
         R, t, _ = shape.kabsch(coarse, target_points)
         return Start(boundary=bd, omega=self.omega0, target_points=target_points,
                      spacing=0.5 * (t_i + t_j), rotation=R, translation=t)
@@ -568,8 +568,8 @@ class DesignProblem:
         limit = options.stop_rms * self.target.diameter()
 
         def reached(x: np.ndarray) -> bool:
-            Y = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
-            return shape.kabsch(Y[::2, ::2], start.target_points)[2] <= limit
+            coarse = shape.coarse_grain(nlp.folded_array(x))
+            return shape.kabsch(coarse, start.target_points)[2] <= limit
 
         return reached
 
@@ -586,14 +586,14 @@ class DesignProblem:
             raise SolverFailed(f"the solution fails re-marching with the NumPy model: {exc}",
                                status="remarch_failed", stats=stats, last_iterate=x) from exc
         Y = numpy_model.fold(pattern, omega)
-        Y_graph = np.stack([c.full() for c in nlp.folded(x)], axis=-1)
+        Y_graph = nlp.folded_array(x)
         scale = np.abs(Y).max()
         if np.abs(Y - Y_graph).max() > 1e-8 * scale:
             raise SolverFailed("the NumPy re-march disagrees with the CasADi graph by "
                                f"{np.abs(Y - Y_graph).max():.3g}", status="remarch_mismatch",
                                stats=stats, last_iterate=x)
         self._check_constraints(pattern, stats, x)
-        R, t, _ = shape.kabsch(Y[::2, ::2], start.target_points)
+        R, t, _ = shape.kabsch(shape.coarse_grain(Y), start.target_points)
         folded = Y @ R.T + t
         fit = Fit(**design_fit(folded, start.target_points, self.target),
                   min_side_over_mean=float(pattern.side_lengths.min()
@@ -609,8 +609,8 @@ class DesignProblem:
         return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
                             target_points=start.target_points, rotation=R, translation=t,
                             fit=fit, stats=stats, problem=problem, x=x,
-                            curvature=curvature_maps(folded[::2, ::2], start.target_points,
-                                                     self.target),
+                            curvature=curvature_maps(shape.coarse_grain(folded),
+                                                     start.target_points, self.target),
                             target_grid=grid)
 
     def _check_constraints(self, pattern, stats: SolveStats, x: np.ndarray) -> None:
@@ -808,7 +808,8 @@ def design_fit(folded: np.ndarray, target_points: np.ndarray,
     the target's diameter, as :class:`~rffqm_nlp.results.Fit` defines them (all but the
     pattern's side and angle measures)."""
     diameter = target.diameter()
-    rms = float(np.sqrt(np.mean(np.sum((folded[::2, ::2] - target_points) ** 2, axis=-1))))
+    coarse = shape.coarse_grain(folded)
+    rms = float(np.sqrt(np.mean(np.sum((coarse - target_points) ** 2, axis=-1))))
     pts = target_points.reshape(-1, 3)
     plane = np.linalg.svd(pts - pts.mean(0), compute_uv=False)[-1] / np.sqrt(len(pts))
     return {"rms": rms / diameter, "plane_rms": float(plane / diameter),

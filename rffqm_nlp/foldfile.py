@@ -23,7 +23,7 @@ from . import __version__
 from .errors import InputError
 from .files import jsonable, write_json
 from .marching import fold, fold_angles
-from .pattern import Pattern, check_omega
+from .pattern import Pattern, check_omega, motion_omegas
 
 CREATOR = "rffqm-nlp"
 PREFIX = "rffqm:"
@@ -82,13 +82,12 @@ def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
 
 # --------------------------------------------------------------------------- FOLD
 def frame_omegas(omega: float, frames: int | np.ndarray | None) -> np.ndarray:
-    """The omegas of the folding frames: ``frames`` values from 0 to ``omega`` or explicit."""
+    """The omegas of the folding frames: none, ``frames`` values from 0 to ``omega``
+    (:func:`~rffqm_nlp.pattern.motion_omegas`) or the explicit omegas ``frames``."""
     if frames is None:
         return np.zeros(0)
     if isinstance(frames, (int, np.integer)):
-        if frames < 1:
-            raise InputError(f"frames must be a positive number of states, got {frames}")
-        return np.linspace(0.0, omega, int(frames))
+        return motion_omegas(omega, frames)
     return np.atleast_1d(check_omega(frames))
 
 

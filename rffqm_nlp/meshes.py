@@ -38,8 +38,8 @@ the diameter), is kept in :attr:`Mesh.deviation_max` and :attr:`Mesh.deviation_r
 noise) the Mesh is refused.
 
 Distances to the shape: :meth:`Mesh.closest_points` gives exact closest points on the mesh
-(trimesh's proximity query); :func:`shape_distances` the RMS and maximum distance of points
-to any target, over its diameter.
+(trimesh's proximity query); :func:`rffqm_nlp.shape.relative_fit` the RMS and maximum
+distance of points to any target, over its diameter.
 """
 
 from __future__ import annotations
@@ -212,18 +212,6 @@ class Mesh(Surface):
                                "config; write it to a file (e.g. mesh.export('part.ply')) and "
                                "use Mesh('part.ply') or [target] mesh = \"part.ply\"")
         return {"mesh": str(self.path)}
-
-
-def shape_distances(target: Surface, points: Any) -> tuple[float, float]:
-    """(RMS, max) distance of ``points`` (..., 3) to the target's shape, over its diameter.
-
-    For a :class:`Mesh` made from a mesh, exact closest points on the mesh; for any other
-    surface, closest points on r(u, v) over its domain (:meth:`Surface.closest_points`)."""
-    dist = np.asarray(target.closest_points(points)[2], dtype=float).ravel()
-    if dist.size == 0:
-        raise SurfaceError("shape_distances needs at least one point")
-    d = target.diameter()
-    return float(np.sqrt(np.mean(dist ** 2)) / d), float(dist.max() / d)
 
 
 # -- loading -------------------------------------------------------------------------------

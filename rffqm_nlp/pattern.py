@@ -1,5 +1,6 @@
-"""The crease pattern produced by marching (one container shared by both forward models)
-and the fold parameter omega's validator, :func:`check_omega`."""
+"""The crease pattern produced by marching (one container shared by both forward models),
+the fold parameter omega's validator, :func:`check_omega`, and the omegas of a folding
+motion, :func:`motion_omegas`."""
 
 from __future__ import annotations
 
@@ -33,6 +34,25 @@ def check_omega(omega: Any, name: str = "omega") -> np.ndarray:
     if bad.any():
         raise InputError(f"{name} must lie in [-pi, pi], got {float(arr[bad].ravel()[0])!r}")
     return arr
+
+
+def check_frames(frames: int, minimum: int = 1, name: str = "frames") -> int:
+    """``frames``, a number of states of a folding motion, checked to be an integer (not a
+    bool) of at least ``minimum``; ``name`` is the argument or option named in the error.
+    Raises :class:`InputError` (one line) otherwise."""
+    if (isinstance(frames, bool) or not isinstance(frames, (int, np.integer))
+            or frames < minimum):
+        raise InputError(f"{name} must be an integer >= {minimum}, got {frames!r}")
+    return int(frames)
+
+
+def motion_omegas(omega_end: float, frames: int, minimum: int = 1,
+                  name: str = "frames") -> np.ndarray:
+    """The fold parameters of a folding motion: ``frames`` values evenly from flat
+    (omega = 0) to ``omega_end``, (frames,). ``frames`` is checked by :func:`check_frames`
+    (``minimum``, ``name``), ``omega_end`` by :func:`check_omega`."""
+    count = check_frames(frames, minimum, name)
+    return np.linspace(0.0, float(check_omega(omega_end, "omega_end")), count)
 
 
 @dataclass(frozen=True)

@@ -10,13 +10,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import trimesh
 
-from . import numpy_model
+from . import numpy_model, surfaces
 from .boundary import BoundaryData
 from .curvature import Curvature
 from .errors import InputError, RffqmError
 from .files import jsonable, write_json
 from .pattern import Pattern
+from .shape import coarse_grain
 
 if TYPE_CHECKING:  # plotly is imported by the view, on use
     import plotly.graph_objects
@@ -29,6 +31,8 @@ REMARCH_RTOL = 1e-9
 #: Keys of a version 1 result's "design" table that version 2 keeps in "solve".
 V1_SOLVE_KEYS = ("continuation", "transcription", "solver", "hessian", "damping", "max_iter",
                  "tol", "time_limit", "stop_rms", "barrier_init", "ipopt_options")
+#: Samples per direction of a rebuilt target surface drawn as a mesh (:func:`target_mesh`).
+TARGET_MESH = 60
 
 
 @dataclass(frozen=True)
@@ -188,7 +192,7 @@ class DesignResult:
     @property
     def coarse(self) -> np.ndarray:
         """The coarse-grained folded lattice r(i, j) = y^{(2i)(2j)}, aligned to the target."""
-        return self.folded[::2, ::2]
+        return coarse_grain(self.folded)
 
     def _repr_html_(self) -> str:
         """The interactive view in a notebook (:func:`rffqm_nlp.view.repr_html`)."""
@@ -264,6 +268,31 @@ class DesignResult:
         except json.JSONDecodeError as exc:
             raise InputError(f"{path} is not valid JSON: {exc}") from None
         return cls.from_dict(data, source=str(path))
+
+
+def target_mesh(result: DesignResult, target: surfaces.Surface | None = None,
+                trust: bool = False, n: int = TARGET_MESH) -> trimesh.Trimesh:
+    """The target as a triangle mesh in the target frame (that of ``result.folded``), for
+    pictures: ``target`` when given, else the kept ``result.target_grid`` (two triangles per
+    cell), else the surface rebuilt from ``result.problem["target"]`` (code that it names
+    is run only with ``trust``). A :class:`~rffqm_nlp.meshes.Mesh` made from a triangle
+    mesh gives those triangles, any other surface its n x n sample (:meth:`Surface.mesh`).
+
+    Raises :class:`RffqmError` (one line) when the target cannot be rebuilt; draw
+    ``result.target_points`` then.
+    """
+    if target is None and result.target_grid is not None:
+        grid = np.asarray(result.target_grid, dtype=float)
+        return trimesh.Trimesh(vertices=grid.reshape(-1, 3),
+                               faces=surfaces.grid_faces(*grid.shape[:2]), process=False)
+    if target is None:
+        if not isinstance(result.problem, dict) or "target" not in result.problem:
+            raise InputError("the result's problem has no [target] table to rebuild the "
+                             "target from")
+        target = surfaces.from_config(result.problem["target"], trust=trust)
+    if isinstance(target, surfaces.Mesh) and target.mesh is not None:
+        return target.mesh.copy()  # the shape itself, not its spline
+    return surfaces.Surface.mesh(target, n, n)
 
 
 def migrate_v1(d: dict[str, Any]) -> dict[str, Any]:

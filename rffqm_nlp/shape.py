@@ -202,12 +202,17 @@ def align(P: Any, Q: Any, reflection: bool = False) -> np.ndarray:
 # -- distances ----------------------------------------------------------------------------
 
 
-def _distances(points: Any, target: Surface | Any) -> np.ndarray:
-    """Distance from each point to the target surface (closest point) or point set."""
-    pts = _points(points, "points")[0]
+def distances_to(points: Any, target: Surface | Any) -> np.ndarray:
+    """Distance from each of ``points`` ((..., 3), or a component triple) to the target,
+    shape (...): to its closest point on a Surface (:meth:`Surface.closest_points`; on a
+    :class:`~rffqm_nlp.meshes.Mesh` made from a mesh, on its triangles), or to the nearest
+    of a point set ((k, 3) or (n, m, 3); scipy's cKDTree)."""
+    pts, shape = _points(points, "points")
     if isinstance(target, Surface):
-        return target.closest_points(pts)[2]
-    return cKDTree(_points(target, "target points")[0]).query(pts)[0]
+        dist = target.closest_points(pts)[2]
+    else:
+        dist = cKDTree(_points(target, "target points")[0]).query(pts)[0]
+    return np.asarray(dist, dtype=float).reshape(shape[:-1])
 
 
 def rms_distance(points: Any, target: Surface | Any) -> float:
@@ -218,7 +223,7 @@ def rms_distance(points: Any, target: Surface | Any) -> float:
     Gauss-Newton on r(u, v), accurate to round-off); for a point set, to the nearest point.
     Points are not aligned first: use :func:`align` for that.
     """
-    d = _distances(points, target)
+    d = distances_to(points, target)
     return float(np.sqrt(np.mean(d**2)))
 
 
@@ -226,7 +231,7 @@ def hausdorff_distance(points: Any, target: Surface | Any) -> float:
     """Hausdorff distance: one-sided max_p dist(p, surface) for a Surface target (closest
     points as in :func:`rms_distance`), symmetric for two point sets."""
     if isinstance(target, Surface):
-        return float(_distances(points, target).max())
+        return float(distances_to(points, target).max())
     p, q = _points(points, "points")[0], _points(target, "target points")[0]
     return float(max(directed_hausdorff(p, q)[0], directed_hausdorff(q, p)[0]))
 
@@ -287,13 +292,13 @@ def shape_fit(folded: np.ndarray, target: Surface) -> dict[str, float]:
     diameter: ``rms_surface``, ``hausdorff`` of the coarse lattice ``folded[::2, ::2]``,
     ``rms_surface_vertices``, ``hausdorff_vertices`` of every vertex, and ``coverage``: the
     coarse lattice's :func:`lattice_area` over the target's :func:`surface_area`."""
-    flat, shape = _points(folded, "folded")
+    shape = _points(folded, "folded")[1]
     if len(shape) != 3:
         raise InputError(f"shape_fit needs a folded state (2N+1, 2M+1, 3), got shape {shape}")
     # one closest-point query for every vertex; the coarse lattice is a subset of them
-    dist = np.asarray(target.closest_points(flat)[2]).reshape(shape[:2]) / target.diameter()
+    dist = distances_to(folded, target) / target.diameter()
     coarse = dist[::2, ::2]
     return {"rms_surface": float(np.sqrt(np.mean(coarse ** 2))), "hausdorff": float(coarse.max()),
             "rms_surface_vertices": float(np.sqrt(np.mean(dist ** 2))),
             "hausdorff_vertices": float(dist.max()),
-            "coverage": lattice_area(folded[::2, ::2]) / surface_area(target)}
+            "coverage": lattice_area(coarse_grain(folded)) / surface_area(target)}

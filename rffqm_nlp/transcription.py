@@ -68,6 +68,10 @@ class NLP:
         """f(x) = 0.5 |res(x)|^2."""
         return 0.5 * ca.sumsqr(self.residuals)
 
+    def folded_array(self, x: np.ndarray) -> np.ndarray:
+        """The folded vertices at the design vector ``x``, (2N+1, 2M+1, 3)."""
+        return np.stack([c.full() for c in self.folded(x)], axis=-1)
+
     def with_rows(self, rows: ca.MX, lower: np.ndarray, upper: np.ndarray) -> "NLP":
         """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
         appended to g (e.g. :func:`rffqm_nlp.clearance.constrain`'s); with lower < upper
@@ -305,7 +309,7 @@ def sequential(setup: Setup) -> NLP:
     inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
     Y = folded_function(N, M).call([*inputs, omega])
     x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()])
-    res = _objective_residuals(setup, [c[::2, ::2] for c in Y], x[groups["rigid"]],
+    res = _objective_residuals(setup, shape.coarse_grain(Y), x[groups["rigid"]],
                                x[:2 * nv + nl + 1])
     # Inline constraints on the marched pattern.
     alpha, beta, _, lh, lv, mu = pattern_function(N, M).call(inputs)[:6]
@@ -527,7 +531,7 @@ def simultaneous(setup: Setup) -> NLP:
                        *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
     # Boundary design vector in BoundaryData.to_vector order.
     bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
-    res = _objective_residuals(setup, [c[::2, ::2] for c in Y], v["rigid"], bvec)
+    res = _objective_residuals(setup, shape.coarse_grain(Y), v["rigid"], bvec)
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
     mean_res, mean = tree.residuals(sides, v["P"])
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))

@@ -11,9 +11,10 @@ The page shows, in the target's frame (every state moved by the design's rigid m
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
   designed omega (:func:`rffqm_nlp.foldfile.edge_assignments`);
-* the target surface, hidden until its button is pressed: the target lattice, or the finer
-  ``result.target_grid`` when the result keeps one (a target that its config cannot
-  rebuild);
+* the target surface, hidden until its button is pressed: the mesh of
+  :func:`rffqm_nlp.results.target_mesh` (the kept ``result.target_grid``, or the surface
+  rebuilt from the result's config without running code), or the target lattice when the
+  target cannot be rebuilt;
 * a slider through the folding motion from flat (omega = 0) to folded flat (omega = +-pi,
   the sign of the designed omega), one step labelled "designed" at the designed omega. Its
   steps restyle x, y, z (and the distances) of the mesh and crease traces; the triangle
@@ -39,13 +40,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
-from scipy.spatial import cKDTree
 
 from . import numpy_model
-from .errors import InputError
+from .errors import RffqmError
 from .export import COLORS, triangles
 from .files import write_text
 from .foldfile import edge_assignments
+from .pattern import motion_omegas
+from .shape import distances_to
+from .surfaces import Surface, grid_faces
 
 if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html_
     from .pattern import Pattern
@@ -67,10 +70,7 @@ _KIND_WIDTHS = {"M": 3, "V": 3, "B": 5}
 def slider_omegas(omega: float, frames: int) -> tuple[np.ndarray, int]:
     """The slider's fold parameters: ``frames`` values evenly from 0 to pi * sign(omega),
     with ``omega`` inserted in order -> ((frames + 1,), index of ``omega``)."""
-    if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 2:
-        raise InputError(f"frames must be an integer >= 2 (flat and folded flat), got {frames!r}")
-    end = np.pi if omega >= 0 else -np.pi
-    even = np.linspace(0.0, end, int(frames))
+    even = motion_omegas(np.pi if omega >= 0 else -np.pi, frames, minimum=2)
     at = int(np.searchsorted(np.abs(even), abs(omega)))
     return np.insert(even, at, omega), at
 
@@ -98,9 +98,7 @@ def target_samples(target_points: np.ndarray, refine: int = TARGET_REFINE) -> np
 
 def distances(points: np.ndarray, target_points: np.ndarray) -> np.ndarray:
     """Distance of every point (..., 3) to the target surface (see the module), (...)."""
-    tree = cKDTree(target_samples(target_points).reshape(-1, 3))
-    d, _ = tree.query(np.asarray(points).reshape(-1, 3))
-    return d.reshape(np.shape(points)[:-1])
+    return distances_to(points, target_samples(target_points))
 
 
 # --------------------------------------------------------------------------- creases
@@ -170,12 +168,26 @@ def _creases(xyz: dict) -> list[dict]:
             for n, k in enumerate("MVB", start=1)]
 
 
-def _target(T: np.ndarray, decimals: int) -> dict:
-    r = np.round(T, decimals)
-    return {"type": "surface", "x": r[..., 0].tolist(), "y": r[..., 1].tolist(),
-            "z": r[..., 2].tolist(), "name": "target", "visible": False, "opacity": 0.45,
-            "showscale": False, "colorscale": [[0, "#9a9a9a"], [1, "#9a9a9a"]],
-            "hoverinfo": "skip"}
+def _target_shape(result: DesignResult, target: Surface | None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (k, 3) and triangles (f, 3) of the target drawn: :func:`target_mesh`, or
+    the cells of the target lattice when the target cannot be rebuilt."""
+    from .results import target_mesh
+
+    try:
+        mesh = target_mesh(result, target)
+    except RffqmError:
+        T = np.asarray(result.target_points, dtype=float)
+        return T.reshape(-1, 3), grid_faces(*T.shape[:2])
+    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces)
+
+
+def _target(vertices: np.ndarray, faces: np.ndarray, decimals: int) -> dict:
+    r = np.round(vertices, decimals)
+    return {"type": "mesh3d", "x": r[:, 0].tolist(), "y": r[:, 1].tolist(),
+            "z": r[:, 2].tolist(), "i": faces[:, 0].tolist(), "j": faces[:, 1].tolist(),
+            "k": faces[:, 2].tolist(), "name": "target", "visible": False, "opacity": 0.45,
+            "color": "#9a9a9a", "hoverinfo": "skip"}
 
 
 def _camera(P: np.ndarray) -> dict:
@@ -203,16 +215,17 @@ def _scene(Y: np.ndarray, T: np.ndarray, designed: np.ndarray) -> dict:
             "camera": _camera(designed)}
 
 
-def spec(result: DesignResult, frames: int = 24) -> dict:
+def spec(result: DesignResult, frames: int = 24, target: Surface | None = None) -> dict:
     """The figure of ``result`` as plain plotly JSON {"data", "layout"}: the traces in the
     order of :data:`TRACES`, a slider with ``frames + 1`` steps (see :func:`slider_omegas`)
-    starting at the designed state, and a button that shows and hides the target."""
+    starting at the designed state, and a button that shows and hides the target
+    (``target``, or the result's: see :func:`_target_shape`)."""
     omega = float(result.omega)
     omegas, at = slider_omegas(omega, frames)
     pat = result.pattern
     Y = states(result, omegas)
     T = np.asarray(result.target_points, dtype=float)
-    S = T if result.target_grid is None else np.asarray(result.target_grid, dtype=float)
+    S, faces = _target_shape(result, target)
     decimals = _decimals(Y)
     paths = crease_paths(pat, omega)
     dist = distances(Y, T).reshape(len(omegas), -1)
@@ -225,7 +238,7 @@ def spec(result: DesignResult, frames: int = 24) -> dict:
                       "label": DESIGNED if n == at else f"{w:.2f}", "value": f"{w:.17g}"})
     first = steps[at]["args"][0]
     data = [_mesh(first, pat, first["intensity"][0], cmax), *_creases(first),
-            _target(S, decimals)]
+            _target(S, faces, decimals)]
     layout = {
         "title": {"text": f"designed state: omega = {omega:.4f}", "x": 0.5},
         "scene": _scene(Y, S, Y[at]), "margin": {"l": 0, "r": 0, "t": 40, "b": 0},
@@ -297,11 +310,12 @@ def repr_html(result: DesignResult, frames: int = 24) -> str:
     return _div(spec(result, frames), "640px")
 
 
-def write_html(result: DesignResult, path: str | os.PathLike, frames: int = 24) -> Path:
-    """Write the figure of ``result`` as one self-contained HTML page (works offline),
-    atomically; returns the path."""
+def write_html(result: DesignResult, path: str | os.PathLike, frames: int = 24,
+               target: Surface | None = None) -> Path:
+    """Write the figure of ``result`` (:func:`spec`, with ``target``) as one self-contained
+    HTML page (works offline), atomically; returns the path."""
     page = ('<!DOCTYPE html>\n<html><head><meta charset="utf-8">'
             "<title>rffqm-nlp design</title>"
             "<style>html,body{margin:0;height:100%}</style></head>\n<body>\n"
-            f"{_div(spec(result, frames), '100vh')}\n</body></html>\n")
+            f"{_div(spec(result, frames, target), '100vh')}\n</body></html>\n")
     return write_text(path, page)

@@ -23,7 +23,8 @@ from .export import COLORS, draw_creases
 from .files import atomic_path
 from .foldfile import faces_vertices
 from .marching import fold
-from .pattern import Pattern, check_omega
+from .pattern import Pattern, check_omega, motion_omegas
+from .shape import distances_to
 
 if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
     import trimesh
@@ -208,10 +209,8 @@ def _add_target(pv, p, mesh, target) -> np.ndarray:
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
         raise InputError(f"target must be a trimesh.Trimesh or (n, 3) points, got shape "
                          f"{pts.shape}")
-    from scipy.spatial import cKDTree
-
     p.add_points(pts, color="gray", opacity=0.5, point_size=4)
-    return cKDTree(pts).query(mesh.points)[0]
+    return distances_to(mesh.points, pts)
 
 
 def _plotter(pv, size: tuple[int, int]):
@@ -273,12 +272,10 @@ def folding_gif(path: str | os.PathLike, pat: Pattern, omega_end: float, frames:
                 size: tuple[int, int] = (480, 360), duration_ms: int = 80) -> Path:
     """A looping GIF of the folding motion from flat (omega = 0) to ``omega_end``, in
     ``frames`` states, coloured by height z with one colour scale for the whole motion."""
-    if int(frames) != frames or frames < 2:
-        raise InputError(f"frames must be an integer >= 2, got {frames!r}")
+    omegas = motion_omegas(omega_end, frames, minimum=2)
     pv = _pyvista()
     import imageio.v3 as iio
 
-    omegas = np.linspace(0.0, float(check_omega(omega_end)), int(frames))
     Ys = fold(pat, omegas)
     mesh = _polydata(pv, Ys[0], pat.N, pat.M)
     mesh["z"] = Ys[0][..., 2].ravel()

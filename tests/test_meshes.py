@@ -11,7 +11,8 @@ from scipy.spatial import Delaunay
 import rffqm_nlp as rq
 from rffqm_nlp import meshes
 from rffqm_nlp.errors import SurfaceError
-from rffqm_nlp.meshes import MAX_DEVIATION, Mesh, shape_distances
+from rffqm_nlp.meshes import MAX_DEVIATION, Mesh
+from rffqm_nlp.shape import distances_to, relative_fit
 
 
 def _lattice_error(mesh: Mesh, surface) -> float:
@@ -122,17 +123,19 @@ def test_closest_points_are_exact_on_the_mesh():
     assert np.allclose(dist.ravel(), np.abs(above[:, 2]), atol=1e-12)
     assert np.allclose(mesh.point(uv[..., 0], uv[..., 1]), closest, atol=1e-9)
     assert np.allclose(mesh.distance(above), np.abs(above[:, 2]), atol=1e-12)
-    rms, worst = shape_distances(mesh, above)
-    assert worst == pytest.approx(np.abs(above[:, 2]).max() / mesh.diameter())
-    assert rms == pytest.approx(np.sqrt(np.mean(above[:, 2] ** 2)) / mesh.diameter())
+    assert np.allclose(distances_to(above.reshape(5, 10, 3), mesh),
+                       np.abs(above[:, 2]).reshape(5, 10), atol=1e-12)
+    fit = relative_fit(above, mesh)
+    assert fit["hausdorff"] == pytest.approx(np.abs(above[:, 2]).max() / mesh.diameter())
+    assert fit["rms"] == pytest.approx(np.sqrt(np.mean(above[:, 2] ** 2)) / mesh.diameter())
 
 
-def test_shape_distances_of_a_parametric_target():
+def test_relative_fit_of_a_parametric_target():
     surface = rq.surfaces.get("sphere_cap", radius=4.0)
     points = surface.lattice(4, 4) * 1.01  # 1% of the radius outside the sphere
-    rms, worst = shape_distances(surface, points)
-    assert rms == pytest.approx(0.04 / surface.diameter(), rel=1e-6)
-    assert worst == pytest.approx(rms, rel=1e-6)
+    fit = relative_fit(points, surface)
+    assert fit["rms"] == pytest.approx(0.04 / surface.diameter(), rel=1e-6)
+    assert fit["hausdorff"] == pytest.approx(fit["rms"], rel=1e-6)
 
 
 def test_a_spline_too_coarse_for_the_shape_is_refused():
@@ -248,10 +251,11 @@ def test_a_design_on_a_mesh_is_judged_against_the_mesh(tmp_path):
     assert faces[inside.all(1)].sum() < rq.shape.surface_area(target) < faces[inside.any(1)].sum()
     result = rq.DesignProblem(target, panels=(8, 8)).solve(rq.SolveOptions(max_iter=30))
     fit = result.fit
-    assert (fit.rms_surface, fit.hausdorff) == pytest.approx(shape_distances(target, result.coarse),
-                                                             rel=1e-12)
+    coarse, every = relative_fit(result.coarse, target), relative_fit(result.folded, target)
+    assert (fit.rms_surface, fit.hausdorff) == pytest.approx(
+        (coarse["rms"], coarse["hausdorff"]), rel=1e-12)
     assert (fit.rms_surface_vertices, fit.hausdorff_vertices) == pytest.approx(
-        shape_distances(target, result.folded), rel=1e-12)
+        (every["rms"], every["hausdorff"]), rel=1e-12)
     assert fit.coverage == pytest.approx(
         rq.shape.lattice_area(result.coarse) / rq.shape.surface_area(target), rel=1e-12)
     assert 0.9 < fit.coverage < 1.1 and fit.rms_surface < 0.25 * fit.plane_rms

@@ -184,5 +184,27 @@ def test_a_result_displays_its_view_in_a_notebook(result):
     assert "Plotly.newPlot(div" in html
     figure = result.view(frames=4)
     assert [trace.type for trace in figure.data] == ["mesh3d", "scatter3d", "scatter3d",
-                                                     "scatter3d", "surface"]
+                                                     "scatter3d", "mesh3d"]
     assert len(figure.layout.sliders[0].steps) == 5
+
+
+def test_target_mesh_of_a_rebuilt_surface_a_kept_grid_and_a_mesh(result):
+    surface = rq.surfaces.from_config(result.problem["target"])
+    rebuilt = results.target_mesh(result, n=9)
+    assert len(rebuilt.vertices) == 81 and len(rebuilt.faces) == 2 * 8 * 8
+    assert rq.shape.distances_to(rebuilt.vertices, surface).max() < 1e-9
+    grid = surface.sample(5, 7)
+    kept = results.target_mesh(replace(result, target_grid=grid))
+    np.testing.assert_array_equal(kept.vertices, grid.reshape(-1, 3))
+    assert len(kept.faces) == 2 * 4 * 6
+    mesh = rq.surfaces.Mesh(rq.surfaces.get("plane").mesh(11, 11))
+    np.testing.assert_array_equal(results.target_mesh(result, target=mesh).faces,
+                                  mesh.mesh.faces)
+
+
+def test_target_mesh_of_a_target_that_cannot_be_rebuilt_is_refused(result):
+    code = {"python": "math:sqrt", "domain": [[-1.0, 1.0], [-1.0, 1.0]]}
+    with pytest.raises(rq.RffqmError, match="pass --trust"):
+        results.target_mesh(replace(result, problem={**result.problem, "target": code}))
+    with pytest.raises(rq.InputError, match=r"no \[target\] table"):
+        results.target_mesh(replace(result, problem={}))

@@ -14,7 +14,7 @@ from plotly.offline import get_plotlyjs
 from scipy.spatial import cKDTree
 from view_results import miura_result
 
-from rffqm_nlp import numpy_model, view
+from rffqm_nlp import numpy_model, results, view
 from rffqm_nlp.errors import InputError
 from rffqm_nlp.export import COLORS
 from rffqm_nlp.foldfile import edge_assignments, edges_vertices
@@ -49,7 +49,7 @@ def payloads(html):
 
 def test_traces(fig):
     types = [t.type for t in fig.data]
-    assert types == ["mesh3d", "scatter3d", "scatter3d", "scatter3d", "surface"]
+    assert types == ["mesh3d", "scatter3d", "scatter3d", "scatter3d", "mesh3d"]
     assert [t.name for t in fig.data[1:4]] == ["mountain", "valley", "boundary"]
     assert [t.line.color for t in fig.data[1:4]] == [COLORS["M"], COLORS["V"], COLORS["B"]]
     mesh = fig.data[0]
@@ -196,9 +196,11 @@ def test_target_trace_uses_the_kept_target_grid(result):
     grid = T[0, 0] + u * (T[-1, 0] - T[0, 0]) + v * (T[0, -1] - T[0, 0]) + [0.0, 0.0, 3.0]
     kept = replace(result, target_grid=grid)
     target = view.spec(kept, frames=4)["data"][4]
-    assert np.array(target["z"]).shape == (13, 11)
-    np.testing.assert_allclose(np.array(target["z"]), grid[..., 2], atol=1e-3)
+    assert target["type"] == "mesh3d" and len(target["i"]) == 2 * 12 * 10
+    np.testing.assert_allclose(np.array(target["z"]), grid[..., 2].ravel(), atol=1e-3)
     z_range = view.spec(kept, frames=4)["layout"]["scene"]["zaxis"]["range"]
     assert z_range[1] >= grid[..., 2].max()
-    plain = view.spec(result, frames=4)["data"][4]
-    assert np.array(plain["z"]).shape == T.shape[:2]
+    plain = view.spec(result, frames=4)["data"][4]  # no config: the target lattice's cells
+    assert len(plain["z"]) == T.shape[0] * T.shape[1]
+    rebuilt = replace(result, problem={"target": {"name": "sphere_cap"}})
+    assert len(view.spec(rebuilt, frames=4)["data"][4]["z"]) == results.TARGET_MESH ** 2
