@@ -5,7 +5,7 @@ import pytest
 
 import rffqm_nlp as rq
 from rffqm_nlp import marching, numpy_model
-from rffqm_nlp.pattern import check_omega
+from rffqm_nlp.pattern import check_omega, motion_omegas
 
 
 def test_check_omega_keeps_scalars_and_1d_arrays():
@@ -34,3 +34,13 @@ def test_both_forward_models_validate_omega_with_it(model):
             model.fold(pat, bad)
         with pytest.raises(rq.InputError, match="^omega must"):
             model.fold_angles(pat, bad)
+
+
+def test_motion_omegas_run_from_flat_and_check_the_count():
+    np.testing.assert_allclose(motion_omegas(-2.0, 5), np.linspace(0.0, -2.0, 5), rtol=0)
+    assert motion_omegas(1.0, 1).tolist() == [0.0]
+    for frames, minimum in ((1, 2), (0, 1), (2.0, 1), (True, 1), ("3", 1)):
+        with pytest.raises(rq.InputError, match=rf"^--frames must be an integer >= {minimum}"):
+            motion_omegas(1.0, frames, minimum=minimum, name="--frames")
+    with pytest.raises(rq.InputError, match="omega_end must lie in"):
+        motion_omegas(4.0, 3)

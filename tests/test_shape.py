@@ -272,3 +272,13 @@ def test_shape_fit_of_the_surface_itself_and_of_an_offset():
     share = 1 - (9 * 7) / (17 * 13)
     assert fit["rms_surface_vertices"] == pytest.approx(
         np.sqrt(share) * 0.02 / surface.diameter(), rel=1e-6)
+
+
+def test_distances_to_keep_the_points_shape_for_surfaces_and_point_sets():
+    plane = rq.surfaces.get("plane")
+    lattice = plane.lattice(3, 4) + np.array([0.0, 0.0, 0.25])
+    np.testing.assert_allclose(rq.shape.distances_to(lattice, plane), np.full((4, 5), 0.25),
+                               atol=1e-12)
+    cloud = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    points = np.array([[[0.2, 0.0, 0.0], [1.0, 0.5, 0.0]]])
+    np.testing.assert_allclose(rq.shape.distances_to(points, cloud), [[0.2, 0.5]], atol=1e-15)
