@@ -101,7 +101,7 @@ def test_check_a_free_design_exits_0(result, tmp_path):
 def test_check_a_fold_file_in_contact_exits_1_with_the_pairs(tmp_path):
     pat = random_pattern()
     foldfile.write_fold(tmp_path / "random.fold", pat, 2.5)
-    report = rq.collisions.collisions(pat, 2.5, clearance=THICKNESS)
+    report = rq.collisions(pat, 2.5, clearance=THICKNESS)
     assert report.pairs == [((6, 1), (8, 1))]
     assert report.first_omega == pytest.approx(1.56, abs=0.01)
     res = invoke("check", tmp_path / "random.fold", "--clearance", THICKNESS)
@@ -166,7 +166,7 @@ def test_render_marks_the_panels_in_contact_red(tmp_path):
     import imageio.v3 as iio
 
     pat = random_pattern()
-    report = rq.collisions.collisions(pat, 2.5, clearance=THICKNESS)
+    report = rq.collisions(pat, 2.5, clearance=THICKNESS)
     red = []
     for name, contacts in (("plain.png", None), ("marked.png", report)):
         img = iio.imread(viz.render_png(tmp_path / name, pat, report.first_omega,
