@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import InputError
+from .files import Key, check_value
 from .numpy_model import fold
 from .pattern import Pattern, check_omega
 
@@ -123,10 +123,8 @@ def collisions(pattern: Pattern, omega_max: float, *, clearance: float = 0.0,
     accuracy of ``first_omega`` in omega. See the module docstring for the method.
     """
     w_max = float(check_omega(omega_max, "omega_max"))
-    if not (np.isfinite(clearance) and clearance >= 0):
-        raise InputError(f"clearance must be a finite distance >= 0, got {clearance!r}")
-    if not (np.isfinite(tol) and tol > 0):
-        raise InputError(f"tol must be a finite positive step in omega, got {tol!r}")
+    clearance = check_value(clearance, Key("number", low=0, hint="(a distance)"), "clearance")
+    tol = check_value(tol, Key("number", low=0, low_open=True, hint="(a step in omega)"), "tol")
     geo = _Geometry(pattern)
     flat = _flat_overlaps(geo)
     first, pairs = _first_contact(geo, w_max, float(clearance), float(tol))

@@ -510,9 +510,15 @@ def check_table(table: Any, spec: Mapping[str, Key], where: str) -> dict[str, An
             for key, value in table.items()}
 
 
-def check_value(value: Any, key: Key, name: str) -> Any:
+def check_value(value: Any, key: Key, name: str, error: type[InputError] = InputError) -> Any:
     """``value`` checked against ``key`` and converted (floats, ints, tuples, dicts); else
-    an :class:`InputError` "<name> must be <what is allowed>, got <what it is>"."""
+    an ``error`` (:class:`InputError` or a subclass, e.g. SurfaceError) "<name> must be
+    <what is allowed>, got <what it is>"."""
+    if error is not InputError:
+        try:
+            return check_value(value, key, name)
+        except InputError as exc:
+            raise error(str(exc)) from None
     if value is None and key.optional:
         return None
     checked = _CHECKS[key.kind](value, key, name)

@@ -60,6 +60,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import ConvexHull, Delaunay
 
 from .errors import SurfaceError
+from .files import Key, check_value
 from .surfaces import Surface
 
 #: Largest angle between a face normal and the best-fit plane's normal for a projection.
@@ -83,6 +84,8 @@ MESH_POINTS_PER_CELL = 4
 CLOUD_POINTS_PER_CELL = 16
 #: Fewest and most knot spans per direction.
 KNOT_SPANS = (4, 60)
+_KNOTS = Key("list", length=2, item=Key("whole", low=KNOT_SPANS[0], high=KNOT_SPANS[1]),
+             hint="(n_u, n_v)")
 #: Raster nodes per direction for the inscribed rectangle.
 RASTER = 200
 
@@ -105,8 +108,11 @@ class Mesh(Surface):
     def __init__(self, source: Any, *, name: str | None = None,
                  knots: tuple[int, int] | None = None, smoothing: float | None = None):
         self.path = Path(source) if isinstance(source, (str, Path)) else None
-        smoothing = None if smoothing is None else _positive_real(smoothing, "smoothing")
-        knots = None if knots is None else _check_knots(knots)
+        if smoothing is not None:
+            smoothing = check_value(smoothing, Key("number", low=0, low_open=True), "smoothing",
+                                    SurfaceError)
+        if knots is not None:
+            knots = check_value(knots, _KNOTS, "knots", SurfaceError)
         what = str(self.path) if self.path is not None else "the mesh"
         self.mesh, points = _load(source, what)
         cloud = self.mesh is None
@@ -604,26 +610,6 @@ def _knot_spans(uv: np.ndarray, per_cell: int) -> tuple[int, int]:
     lo, hi = KNOT_SPANS
     return (int(np.clip(round(math.sqrt(cells * aspect)), lo, hi)),
             int(np.clip(round(math.sqrt(cells / aspect)), lo, hi)))
-
-
-def _check_knots(knots: Any) -> tuple[int, int]:
-    lo, hi = KNOT_SPANS
-    try:
-        n_u, n_v = knots
-        ok = all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) and lo <= k <= hi
-                 for k in (n_u, n_v))
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise SurfaceError(f"knots must be (n_u, n_v), integers in [{lo}, {hi}], got {knots!r}")
-    return int(n_u), int(n_v)
-
-
-def _positive_real(x: Any, what: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(x)) or x <= 0:
-        raise SurfaceError(f"{what} must be a positive number, got {x!r}")
-    return float(x)
 
 
 def _uniform_knots(lo: float, hi: float, spans: int) -> np.ndarray:

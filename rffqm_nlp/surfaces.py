@@ -853,10 +853,7 @@ def _checked(table: Mapping[str, Any], spec: dict[str, Key]) -> dict[str, Any]:
 
 
 def _checked_value(value: Any, key: Key, name: str) -> Any:
-    try:
-        return check_value(value, key, name)
-    except InputError as exc:
-        raise SurfaceError(str(exc)) from None
+    return check_value(value, key, name, SurfaceError)
 
 
 # -- validation helpers -------------------------------------------------------------------

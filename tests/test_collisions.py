@@ -179,8 +179,8 @@ def test_report_to_dict_and_inputs():
     assert rep.to_dict() == {"free": True, "first_omega": None, "pairs": [],
                              "flat_overlaps": [], "omega_max": 1.0, "clearance": 0.0}
     for kw in ({"omega_max": 4.0}, {"omega_max": 1.0, "clearance": -1.0},
-               {"omega_max": 1.0, "tol": 0.0}):
-        with pytest.raises(InputError):
+               {"omega_max": 1.0, "tol": 0.0}, {"omega_max": 1.0, "tol": "small"}):
+        with pytest.raises(InputError, match=f"^{list(kw)[-1]} must "):
             collisions(miura(2, 2), **kw)
 
 
