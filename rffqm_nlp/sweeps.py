@@ -120,13 +120,10 @@ class Range:
     log: bool = False
 
     def __post_init__(self) -> None:
-        if not (_is_number(self.low) and _is_number(self.high)) or not self.low <= self.high:
-            raise InputError(f"a range needs finite numbers low <= high, got low = "
-                             f"{describe_value(self.low)}, high = {describe_value(self.high)}")
-        if not isinstance(self.log, bool):
-            raise InputError(f"log of a range is true or false, got {describe_value(self.log)}")
-        if self.log and not self.low > 0:
-            raise InputError(f"a log range needs low > 0, got {self.low:g}")
+        low = check_value(self.low, Key("number"), "low")
+        check_value(self.high, Key("number", low=low, hint="(low <= high)"), "high")
+        if check_value(self.log, Key("bool"), "log"):
+            check_value(low, Key("number", low=0, low_open=True, hint="(a log range)"), "low")
 
     def draw(self, rng: np.random.Generator, integer: bool = False) -> float | int:
         """One value drawn from this range (a whole number in it when ``integer``)."""
@@ -836,7 +833,8 @@ def _label(value: Any) -> str:
     error messages, which never quote a file's content)."""
     if isinstance(value, float):
         return f"{value:.4g}"
-    if isinstance(value, list) and value and all(_is_number(v) for v in value):
+    if isinstance(value, list) and value and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
         return "x".join(_label(v) for v in value)
     if isinstance(value, (list, dict)):
         return json.dumps(_shown_strings(value), separators=(",", ":"))
@@ -881,8 +879,3 @@ def _canonical(config: Any) -> str:
         return v
 
     return json.dumps(norm(config), sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) \
-        and math.isfinite(value)
