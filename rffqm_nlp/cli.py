@@ -37,10 +37,10 @@ from .errors import InputError, RffqmError, one_line
 from .export import EXPORTERS
 from .files import check_out_dir, jsonable, replace_folder, write_json
 from .pattern import check_frames, check_omega, motion_omegas
+from .results import DesignResult
 
 if TYPE_CHECKING:
     from .design import DesignProblem, SolveOptions
-    from .results import DesignResult
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode="markdown",
                   help="Forward and inverse design of rigidly and flat-foldable origami.")
@@ -123,19 +123,6 @@ class _PanelsCommand(TyperCommand):
             joined.append(args[i])
             i += 1
         return super().parse_args(ctx, joined)
-
-
-def _load_result(directory: Path) -> "DesignResult":
-    """A saved design result, with one-line errors for anything that is not one."""
-    from .results import DesignResult
-
-    try:
-        return DesignResult.load(directory)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        if isinstance(exc, RffqmError):
-            raise
-        raise InputError(f"{directory}: broken design result ({type(exc).__name__}: "
-                         f"{exc}); run rffqm design again") from None
 
 
 def _result_folder(result: Path) -> Path:
@@ -403,7 +390,7 @@ def _design_to_check(source: Path) -> tuple:
 
         pattern, omega, _ = read_fold(source)
         return pattern, omega
-    result = _load_result(source)
+    result = DesignResult.load(source)
     return result.pattern, result.omega
 
 
@@ -499,7 +486,7 @@ def fold_cmd(
     with user_errors():
         if (omega is None) == (frames is None):
             raise InputError("give exactly one of --omega W or --frames K")
-        result = _load_result(result_dir)
+        result = DesignResult.load(result_dir)
         if frames is not None:
             om = motion_omegas(result.omega, frames, name="--frames")
         else:
@@ -540,7 +527,7 @@ def export(
             raise InputError(f"unknown format {format!r}; choose one of "
                              f"{', '.join(EXPORTERS)}")
         exporter = EXPORTERS[fmt]
-        result = _load_result(result_dir)
+        result = DesignResult.load(result_dir)
         om = result.omega if omega is None else float(check_omega(omega, "--omega"))
         path = out if out is not None else _result_folder(result_dir) / exporter.filename
         if path.suffix.lower() != exporter.suffix:
@@ -571,7 +558,7 @@ def render(
 
     with user_errors():
         _check_frames(frames)
-        result = _load_result(result_dir)
+        result = DesignResult.load(result_dir)
         ok, reason = viz.rendering_available()
         if not ok:
             raise RffqmError(f"cannot render: {reason}")
@@ -606,7 +593,7 @@ def view_cmd(
 
     with user_errors():
         _check_frames(frames)
-        result = _load_result(result_dir)
+        result = DesignResult.load(result_dir)
         path = out if out is not None else _result_folder(result_dir) / VIEW_FILE
         if path.suffix.lower() not in (".html", ".htm"):
             raise InputError(f"--out must name an .html file, got {path}")

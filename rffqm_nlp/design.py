@@ -28,7 +28,7 @@ from . import clearance, numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .collisions import collisions
 from .curvature import curvature_maps
-from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed,
+from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed, one_line,
                      raise_for_ipopt)
 from .files import (Key, check_table, check_value, describe_value, key_name, read_toml,
                     unknown_key)
@@ -643,17 +643,6 @@ class DesignProblem:
         """{"target", "design", "solve"}: this problem solved with ``options``."""
         return {**self.to_config(), "solve": options.to_config()}
 
-    @classmethod
-    def from_config(cls, config: dict[str, Any], root: str | Path | None = None,
-                    trust: bool = False) -> "DesignProblem":
-        """The problem of a design file's tables (see :func:`from_config`)."""
-        return from_config(config, root, trust)[0]
-
-    @classmethod
-    def load(cls, path: str | Path, trust: bool = False) -> "DesignProblem":
-        """The problem of a design file (see :func:`load_design`)."""
-        return load_design(path, trust)[0]
-
 
 def from_config(config: dict[str, Any], root: str | Path | None = None,
                 trust: bool = False) -> tuple[DesignProblem, SolveOptions]:
@@ -933,7 +922,7 @@ def _ipopt_options(options: dict[str, Any]) -> dict[str, str | int | float]:
                       {**{f"ipopt.{k}": v for k, v in out.items()}, "ipopt.sb": "yes",
                        "ipopt.print_level": 0, "print_time": False})
         except RuntimeError as exc:
-            reason = str(exc).strip().splitlines()[-1].split(": ", 1)[-1]
+            reason = re.split(r"\.[ch]pp:\d+: ", one_line(exc))[-1]  # CasADi's last word
             if reason.startswith("Invalid options"):
                 reason += " It printed which and why above."
             raise InputError(f"IPOPT rejects [solve] ipopt_options ({', '.join(out)}): "
@@ -1094,7 +1083,7 @@ def solve_multistart(problem: DesignProblem, options: SolveOptions, *,
         except (InfeasibleDesign, SolverFailed) as exc:
             errors.append(exc)
             run.update(status=getattr(exc, "status", "") or "Infeasible_Problem_Detected",
-                       rms=None, iterations=None, reason=" ".join(str(exc).split()))
+                       rms=None, iterations=None, reason=one_line(exc))
         else:
             run.update(status=res.stats.status, rms=res.fit.rms,
                        iterations=res.stats.iterations, reason="")
@@ -1105,7 +1094,7 @@ def solve_multistart(problem: DesignProblem, options: SolveOptions, *,
     if best is None:
         statuses = ", ".join(sorted({r["status"] for r in runs}))
         message = (f"all {options.multistart} starts of the multistart failed ({statuses}); "
-                   f"the problem's own start: {errors[0]}")
+                   f"the problem's own start: {one_line(errors[0])}")
         failed = [e for e in errors if isinstance(e, SolverFailed)]
         if not failed:
             raise InfeasibleDesign(message) from errors[0]

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .results import SolveStats
 
 
 class RffqmError(Exception):
@@ -69,24 +72,26 @@ class InfeasibleDesign(RffqmError):
 class SolverFailed(RffqmError):
     """IPOPT (or another solver) did not succeed; carries its status and the last iterate.
 
+    ``stats`` is the design solve's :class:`~rffqm_nlp.results.SolveStats` (None for the
+    other solves, e.g. the side-length NLP, whose message says the status and iterations).
     ``best_iterate`` is the feasible point with the smallest objective the solver visited
     (for the simultaneous design NLP, an iterate's boundary data re-marched; None when it
     visited none or does not report iterates); it can warm-start a new solve.
     """
 
     def __init__(
-        self, message: str, status: str = "", stats: dict | None = None, last_iterate: Any = None,
-        best_iterate: Any = None,
+        self, message: str, status: str = "", stats: "SolveStats | None" = None,
+        last_iterate: Any = None, best_iterate: Any = None,
     ):
         super().__init__(message)
         self.status = status
-        self.stats = stats or {}
+        self.stats = stats
         self.last_iterate = last_iterate
         self.best_iterate = best_iterate
 
 
 def raise_for_ipopt(status: str, iterations: int, what: str, infeasible_hint: str,
-                    failed_hint: str, stats: dict | None = None,
+                    failed_hint: str, stats: "SolveStats | None" = None,
                     last_iterate: Any = None, best_iterate: Any = None) -> None:
     """Raise the named error for an unsuccessful IPOPT solve of ``what``.
 

@@ -1,4 +1,5 @@
-"""Files on disk: TOML input, atomic writes, JSON without NaN, and whole-folder replacement.
+"""Files on disk: TOML and JSON input, atomic writes, JSON without NaN, and whole-folder
+replacement.
 
 Every file is written atomically (a temporary file in the target folder, then
 :func:`os.replace`). A command that writes a folder of files writes them into a staging
@@ -51,6 +52,9 @@ DIR_MODE = 0o777 & ~_umask()
 # --------------------------------------------------------------------------- reading
 #: Largest TOML file read (bytes): a design or study file is a few hundred bytes.
 MAX_TOML_BYTES = 1 << 20
+#: Largest JSON file read (bytes): a design result or FOLD file of the largest patterns
+#: stays far below it.
+MAX_JSON_BYTES = 512 << 20
 _FILE_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
                (stat.S_ISSOCK, "a socket"))
@@ -67,25 +71,9 @@ def read_toml(path: str | os.PathLike, what: str = "file",
     file's content).
     """
     try:
-        _check_regular(os.stat(path), path, what, error)
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO swapped in never blocks
-        with os.fdopen(fd, "rb") as fh:
-            _check_regular(os.fstat(fh.fileno()), path, what, error)
-            data = fh.read(MAX_TOML_BYTES + 1)
+        text = _read_text(path, what, error, MAX_TOML_BYTES, "TOML")
     except FileNotFoundError:
         raise error(f"no such {what}: {path}") from None
-    except (IsADirectoryError, NotADirectoryError):
-        raise error(f"{what} {path} is not a file") from None
-    except OSError as exc:
-        raise error(f"cannot read {what} {path}: {exc.strerror or type(exc).__name__}") from None
-    if len(data) > MAX_TOML_BYTES:
-        raise error(f"{what} {path} is larger than {MAX_TOML_BYTES // 1024} KiB; "
-                    "a TOML file this big is not a design or study file")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise error(f"{what} {path} is not UTF-8 text (byte {exc.start}); a TOML file is "
-                    "UTF-8 text") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -94,14 +82,69 @@ def read_toml(path: str | os.PathLike, what: str = "file",
         raise error(f"{what} {path} nests its arrays or tables too deeply") from None
 
 
-def _check_regular(st: os.stat_result, path: Any, what: str, error: type[InputError]) -> None:
-    """Refuse anything but a regular file of at most :data:`MAX_TOML_BYTES`."""
+def read_json(path: str | os.PathLike, what: str = "file",
+              error: type[InputError] = InputError) -> Any:
+    """The value of a JSON file; anything else raises ``error`` naming ``what`` (e.g.
+    "design result") and the path, on one line.
+
+    Refused as by :func:`read_toml` (a missing path, a folder, FIFO, device or socket,
+    files over :data:`MAX_JSON_BYTES`, text that is not UTF-8), and invalid JSON (by line
+    and column).
+    """
+    try:
+        text = _read_text(path, what, error, MAX_JSON_BYTES, "JSON")
+    except FileNotFoundError:
+        raise error(f"no {what} at {path}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"{what} {path} is not valid JSON: {exc.msg} (at line {exc.lineno}, "
+                    f"column {exc.colno})") from None
+    except RecursionError:
+        raise error(f"{what} {path} nests its arrays or objects too deeply") from None
+
+
+def _read_text(path: str | os.PathLike, what: str, error: type[InputError], limit: int,
+               language: str) -> str:
+    """The UTF-8 text of the regular file ``path`` of at most ``limit`` bytes (a file of
+    ``language``, e.g. "TOML"); FileNotFoundError passes through, every other refusal is
+    ``error``. Nothing but a regular file is opened, and never blocking (a FIFO swapped in
+    between the check and the open is refused too)."""
+    try:
+        _check_regular(os.stat(path), path, what, error, limit, language)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with os.fdopen(fd, "rb") as fh:
+            _check_regular(os.fstat(fh.fileno()), path, what, error, limit, language)
+            data = fh.read(limit + 1)
+    except FileNotFoundError:
+        raise
+    except (IsADirectoryError, NotADirectoryError):
+        raise error(f"{what} {path} is not a file") from None
+    except OSError as exc:
+        raise error(f"cannot read {what} {path}: {exc.strerror or type(exc).__name__}") from None
+    if len(data) > limit:
+        raise error(f"{what} {path} is larger than the {_size(limit)} a {what} may have")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{what} {path} is not UTF-8 text (byte {exc.start}); a {language} file "
+                    "is UTF-8 text") from None
+
+
+def _check_regular(st: os.stat_result, path: Any, what: str, error: type[InputError],
+                   limit: int, language: str) -> None:
+    """Refuse anything but a regular file of at most ``limit`` bytes."""
     if not stat.S_ISREG(st.st_mode):
         kind = next((name for test, name in _FILE_KINDS if test(st.st_mode)), "not a file")
-        raise error(f"{what} {path} is {kind}, not a regular file; give a TOML file")
-    if st.st_size > MAX_TOML_BYTES:
-        raise error(f"{what} {path} has {st.st_size} bytes, more than the "
-                    f"{MAX_TOML_BYTES // 1024} KiB a design or study file may have")
+        raise error(f"{what} {path} is {kind}, not a regular file; give a {language} file")
+    if st.st_size > limit:
+        raise error(f"{what} {path} has {st.st_size} bytes, more than the {_size(limit)} a "
+                    f"{what} may have")
+
+
+def _size(limit: int) -> str:
+    """A byte count in KiB, or in MiB from 64 MiB on."""
+    return f"{limit >> 20} MiB" if limit >= 64 << 20 else f"{limit >> 10} KiB"
 
 
 def _toml_problem(exc: Exception) -> str:

@@ -11,7 +11,6 @@ used).
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -20,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .errors import InputError
-from .files import jsonable, write_json
+from .errors import InputError, one_line
+from .files import describe_value, jsonable, read_json, write_json
 from .marching import fold, fold_angles
 from .pattern import Pattern, check_omega, motion_omegas
 
@@ -301,25 +300,25 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
 
     ``metadata`` holds the ``rffqm:`` keys of the file other than omega, pattern and
     version, without the prefix. Raises :class:`InputError` for a file that is not valid
-    JSON, not a FOLD file, or not written by this package.
+    JSON (or no regular file: a folder, a FIFO, a device), not a FOLD file, or not written
+    by this package.
     """
     path = Path(path)
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: cannot read a FOLD (JSON) file: {exc}") from None
+    d = read_json(path, "FOLD file")
     problems = validate_fold(d)
     if problems:
         raise InputError(f"{path} is not a valid FOLD file: " + "; ".join(problems))
     if d.get("file_creator") != CREATOR or PREFIX + "pattern" not in d:
         raise InputError(f"{path} is a FOLD file but not one written by {CREATOR} "
-                         f"(file_creator {d.get('file_creator')!r}, no 'rffqm:pattern'); "
+                         f"(file_creator {describe_value(d.get('file_creator'))}, no "
+                         "'rffqm:pattern'); "
                          "only files from write_fold carry the design data")
     try:
         pat = Pattern.from_dict(d[PREFIX + "pattern"])
         omega = float(check_omega(d[PREFIX + "omega"]))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{path}: broken rffqm design data: {exc!r}") from None
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{path}: broken rffqm design data ({type(exc).__name__}: "
+                         f"{one_line(exc)})") from None
     xy = np.asarray(d["vertices_coords"], dtype=float)
     if xy.shape != ((pat.N + 1) * (pat.M + 1), 2) or not np.allclose(
             xy, pat.X[..., :2].reshape(-1, 2), rtol=0, atol=1e-9):

@@ -219,11 +219,11 @@ def _solution(bd: BoundaryData, A: np.ndarray, ell: np.ndarray, value: float, fl
         boundary = bd.with_lengths(ell)
     except InputError as exc:
         raise SolverFailed(f"IPOPT's lengths are not admissible boundary lengths: {exc}",
-                           status="invalid_lengths", stats=stats, last_iterate=ell) from exc
+                           status="invalid_lengths", last_iterate=ell) from exc
     if sides.min() < floor:
         raise SolverFailed(
             f"the solution violates its bound: smallest side {sides.min():.3g} of the mean, "
-            f"bound {floor:.3g}", status="bound_violated", stats=stats, last_iterate=ell)
+            f"bound {floor:.3g}", status="bound_violated", last_iterate=ell)
     return SideLengthSolution(boundary=boundary, sides=sides, objective=value,
                               min_over_mean=float(sides.min()), stats=stats)
 
@@ -247,7 +247,7 @@ def _solve(name: str, x, f, g, opts: dict, x0, lbx, ubx, lbg,
         raise_for_ipopt(st["return_status"], stats["iterations"],
                         f"the {name} side-length problem",
                         "lower min_length or change the boundary angles",
-                        "raise max_iter or relax tol", stats, xs)
+                        "raise max_iter or relax tol", last_iterate=xs)
     return xs, float(sol["f"]), stats
 
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
@@ -15,8 +14,8 @@ import trimesh
 from . import numpy_model, surfaces
 from .boundary import BoundaryData
 from .curvature import Curvature
-from .errors import InputError, RffqmError
-from .files import jsonable, write_json
+from .errors import InputError, RffqmError, one_line
+from .files import jsonable, read_json, write_json
 from .pattern import Pattern
 from .shape import coarse_grain
 
@@ -232,18 +231,19 @@ class DesignResult:
         ``source`` names the file in the errors."""
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise InputError(f"{source}: not a design result written by rffqm-nlp")
-        if d.get("version") == 1:
-            d = migrate_v1(d)
-        if d.get("version") != VERSION:
-            raise InputError(f"{source}: design result version {d.get('version')!r} is not "
-                             f"supported (this rffqm-nlp reads versions 1 and {VERSION})")
         try:
+            if d.get("version") == 1:
+                d = migrate_v1(d)
+            if d.get("version") != VERSION:
+                raise InputError(f"{source}: design result version {d.get('version')!r} is "
+                                 f"not supported (this rffqm-nlp reads versions 1 and "
+                                 f"{VERSION})")
             return _checked(d, source)
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, RffqmError):
                 raise
             raise InputError(f"{source}: broken design result ({type(exc).__name__}: "
-                             f"{exc})") from None
+                             f"{one_line(exc)}); run the design again") from None
 
     def save(self, directory: str | os.PathLike) -> Path:
         """Write ``result.json`` into ``directory`` (created if needed), atomically; a
@@ -256,18 +256,12 @@ class DesignResult:
     @classmethod
     def load(cls, directory: str | os.PathLike) -> "DesignResult":
         """Read a result saved by :meth:`save` (a folder, or the ``result.json`` itself),
-        validated as :meth:`from_dict` says."""
+        validated as :meth:`from_dict` says; anything that is not one (no file, a FIFO, a
+        device, not JSON, a broken result) is an :class:`InputError`."""
         path = Path(directory)
         if path.is_dir():
             path = path / FILENAME
-        try:
-            with open(path) as fh:
-                data = json.load(fh)
-        except FileNotFoundError:
-            raise InputError(f"no design result at {path}") from None
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path} is not valid JSON: {exc}") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_json(path, "design result"), source=str(path))
 
 
 def target_mesh(result: DesignResult, target: surfaces.Surface | None = None,

@@ -68,8 +68,8 @@ import numpy as np
 from .design import FILE_KEYS, DesignProblem, SolveOptions, check_memory
 from .design import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
-from .files import (Key, atomic_path, check_table, check_value, describe_value, read_toml,
-                    shown_name)
+from .files import (Key, atomic_path, check_table, check_value, describe_value, read_json,
+                    read_toml, shown_name, write_json)
 from .surfaces import resolve_reference
 from .results import DesignResult, Fit, SolveStats
 
@@ -411,7 +411,7 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _stat_columns(stats: SolveStats | None) -> dict[str, Any]:
-    if not isinstance(stats, SolveStats):
+    if stats is None:
         return {}
     return {"iterations": stats.iterations, "build_time": stats.build_time,
             "solve_time": stats.solve_time}
@@ -665,8 +665,7 @@ def save_outcome(folder: Path, design: Design, outcome: Mapping[str, Any]) -> di
         DesignResult.from_dict(outcome["result"]).save(folder)
     record = {"format": ROW_FORMAT, "version": ROW_VERSION, "id": design.id,
               "name": design.name, "config": design.config, "row": row}
-    with atomic_path(folder / ROW_FILE) as tmp:
-        tmp.write_text(json.dumps(record, allow_nan=False))
+    write_json(folder / ROW_FILE, record)
     return row
 
 
@@ -675,12 +674,12 @@ def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
     this design: row.json of this id and configuration with a final status, and for a
     solved design a loadable result.json of the same problem and fit. Otherwise None."""
     try:
-        record = json.loads((folder / ROW_FILE).read_text())
+        record = read_json(folder / ROW_FILE, "row file")
         if (record.get("format") != ROW_FORMAT or record.get("version") != ROW_VERSION
                 or record.get("id") != design.id or design_id(record["config"]) != design.id):
             return None
         row = {column: record["row"][column] for column in OUTCOME_COLUMNS}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+    except (ValueError, KeyError, TypeError, AttributeError):   # InputError is a ValueError
         return None
     if row["status"] not in KEPT_ROW_STATUSES:
         return None

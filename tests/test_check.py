@@ -114,7 +114,7 @@ def test_check_a_fold_file_in_contact_exits_1_with_the_pairs(tmp_path):
 
 @pytest.mark.parametrize("args, fragment", [
     (["missing"], "no design result"),
-    (["missing.fold"], "cannot read a FOLD"),
+    (["missing.fold"], "no FOLD file"),
     (["{run}", "--clearance", "-1"], "--clearance must be a finite distance >= 0"),
     (["{run}", "--omega", "4"], "--omega"),
 ])

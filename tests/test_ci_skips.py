@@ -22,14 +22,15 @@ TESTS = {
 PASSING = "def test_elsewhere():\n    pass\n"
 
 
-def run(tmp_path: Path, kind: str, ci: bool) -> subprocess.CompletedProcess:
-    """pytest on one tiny test file next to a copy of the project's conftest.py."""
+def run(tmp_path: Path, kind: str, ci: bool | str) -> subprocess.CompletedProcess:
+    """pytest on one tiny test file next to a copy of the project's conftest.py; ``ci``:
+    True sets CI=1, a string sets CI to it, False leaves CI unset."""
     shutil.copy(CONFTEST, tmp_path / "conftest.py")
     (tmp_path / f"test_{kind}.py").write_text(TESTS[kind])
     (tmp_path / "test_passing.py").write_text(PASSING)
     env = {k: v for k, v in os.environ.items() if k != "CI"}
-    if ci:
-        env["CI"] = "1"
+    if ci is not False:
+        env["CI"] = "1" if ci is True else ci
     return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            str(tmp_path)], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=120)
@@ -51,6 +52,15 @@ def test_a_skip_passes_off_ci(tmp_path, kind):
     proc = run(tmp_path, kind, ci=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "skipped tests fail on CI" not in proc.stdout
+
+
+@pytest.mark.parametrize("value, on_ci", [("false", False), ("FALSE", False), ("0", False),
+                                          ("no", False), ("", False), ("true", True),
+                                          ("yes", True)])
+def test_ci_is_any_value_but_false_ones(tmp_path, value, on_ci):
+    proc = run(tmp_path, "skips", ci=value)
+    assert proc.returncode == (1 if on_ci else 0), proc.stdout + proc.stderr
+    assert ("skipped tests fail on CI" in proc.stdout) == on_ci
 
 
 def test_no_skip_passes_on_ci(tmp_path):

@@ -541,8 +541,7 @@ def test_a_lambda_or_closure_target_solves_saves_and_reloads(callable_solved):
 def test_rebuilding_a_callable_target_is_refused_in_one_line(callable_solved, tmp_path):
     _, _, result, name, folder = callable_solved
     problem = DesignResult.load(folder).problem
-    attempts = [lambda: DesignProblem.from_config(problem),
-                lambda: design.from_config(problem),
+    attempts = [lambda: design.from_config(problem),
                 lambda: surfaces.from_config(problem["target"])]
     toml = tmp_path / "again.toml"
     domain = problem["target"]["domain"]
