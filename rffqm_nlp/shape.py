@@ -94,7 +94,7 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
     M = r_uv.n, N = r_vv.n. Second-order accurate in hu, hv. The stencils skip the centre
     point in r_u, r_v and only see second differences through n, so this loss alone is blind
     to tangential offsets between the four parity classes (i mod 2, j mod 2): combine it with
-    :func:`edge_vectors` terms (docs/paper.md s.8).
+    a term that sees them, such as the design's position term (docs/paper.md s.8).
     """
     comps, _ = _split(P)
     n, m = comps[0].shape
@@ -117,45 +117,6 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
     normal = [c / norm for c in cross]
     return (_dot(r_u, r_u), _dot(r_u, r_v), _dot(r_v, r_v),
             _dot(r_uu, normal), _dot(r_uv, normal), _dot(r_vv, normal))
-
-
-def _edges(comps: Sequence[Any]) -> tuple[list, list]:
-    n, m = comps[0].shape
-    d_i = [c[1:n, 0:m] - c[0:n - 1, 0:m] for c in comps]
-    d_j = [c[0:n, 1:m] - c[0:n, 0:m - 1] for c in comps]
-    return d_i, d_j
-
-
-def edge_vectors(P: Lattice) -> tuple[Any, Any]:
-    """(d_i, d_j): r[i+1, j] - r[i, j] for all (n-1) x m pairs along i and
-    r[i, j+1] - r[i, j] for all n x (m-1) pairs along j, boundary included.
-
-    Forward differences join neighbouring parity classes, so terms built on them (lengths,
-    directions) see the sideways offsets that central differences miss (docs/paper.md s.8).
-    """
-    comps, stacked = _split(P)
-    d_i, d_j = _edges(comps)
-    return _join(d_i, stacked), _join(d_j, stacked)
-
-
-def edge_lengths(P: Lattice) -> tuple[Any, Any]:
-    """Lengths of :func:`edge_vectors`: ((n-1, m), (n, m-1)) distances between neighbours."""
-    d_i, d_j = _edges(_split(P)[0])
-    return _sqrt(_dot(d_i, d_i)), _sqrt(_dot(d_j, d_j))
-
-
-def second_differences(P: Lattice) -> tuple[Any, Any]:
-    """(d_ii, d_jj): r[i+1,j] - 2 r[i,j] + r[i-1,j] for all (n-2) x m points with both
-    i-neighbours (boundary columns included) and the same along j, n x (m-2).
-
-    Unscaled (multiply by 1/h^2 for r_uu, r_vv); they carry the bending along the boundary
-    rows and columns that :func:`fundamental_forms` leaves out.
-    """
-    comps, stacked = _split(P)
-    n, m = comps[0].shape
-    d_ii = [c[2:n, 0:m] - 2 * c[1:n - 1, 0:m] + c[0:n - 2, 0:m] for c in comps]
-    d_jj = [c[0:n, 2:m] - 2 * c[0:n, 1:m - 1] + c[0:n, 0:m - 2] for c in comps]
-    return _join(d_ii, stacked), _join(d_jj, stacked)
 
 
 # -- rigid alignment ----------------------------------------------------------------------

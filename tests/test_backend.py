@@ -59,6 +59,6 @@ def test_vertex_and_shape_dispatch_through_it():
     np.testing.assert_allclose(np.ravel(mu(a, b)), vertex.mv_multiplier(a, b, s), rtol=1e-14)
     P = np.random.default_rng(1).normal(size=(3, 4, 3))
     comps = [ca.SX.sym(c, 3, 4) for c in "xyz"]
-    lengths = ca.Function("l", comps, list(shape.edge_lengths(comps)))
-    for got, want in zip(lengths(*(P[..., k] for k in range(3))), shape.edge_lengths(P)):
+    forms = ca.Function("f", comps, list(shape.fundamental_forms(comps)))
+    for got, want in zip(forms(*(P[..., k] for k in range(3))), shape.fundamental_forms(P)):
         np.testing.assert_allclose(got.full(), want, rtol=1e-14)
