@@ -166,11 +166,6 @@ class _Geometry:
         """Panel centroids (..., P, 3) of states Y (..., V, 3)."""
         return _centroid(Y[..., self.corners, :])
 
-    def non_adjacent(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Mask of the pairs that share no vertex (row or column apart by 2 or more)."""
-        i, j = self.ij[:, 0], self.ij[:, 1]
-        return np.maximum(np.abs(i[p] - i[q]), np.abs(j[p] - j[q])) >= 2
-
     def label(self, p: int, q: int) -> PanelPair:
         """1-based panel pair, smaller panel first."""
         a, b = sorted((int(p), int(q)))

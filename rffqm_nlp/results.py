@@ -83,11 +83,6 @@ class Fit:
                   if f.default is MISSING or d.get(f.name) is not None}
         return cls(**{name: _fit_value(name, value) for name, value in values.items()})
 
-    def is_finite(self) -> bool:
-        """Whether every measure that was measured is a finite number."""
-        return bool(np.all(np.isfinite([v for v in self.to_dict().values()
-                                         if v is not None and not isinstance(v, bool)])))
-
 
 def _fit_value(name: str, value: Any) -> float | bool | None:
     """A Fit field's value as stored: None stays None, ``collision_free`` a bool (a JSON

@@ -6,6 +6,12 @@ import numpy as np
 from hypothesis import assume, strategies as st
 
 
+def fit_is_finite(fit) -> bool:
+    """Whether every measure of a :class:`rffqm_nlp.Fit` that was measured is finite."""
+    return bool(np.all(np.isfinite([v for v in fit.to_dict().values()
+                                    if v is not None and not isinstance(v, bool)])))
+
+
 def panel_distances(P: np.ndarray) -> np.ndarray:
     """Four sides and two diagonals of every panel of a vertex lattice, (6, N, M)."""
     a, b, c, d = P[:-1, :-1], P[1:, :-1], P[:-1, 1:], P[1:, 1:]
