@@ -13,10 +13,11 @@ point into preallocated buffers (trial points evaluate only r and g). The marchi
 equations are explicit (each computes one new quantity from earlier ones), so their
 Jacobian in s is triangular after a permutation, found once from its sparsity (a matching
 of equations to unknowns, then the longest chain of dependencies of each equation, its
-level). The state's sensitivity S = -C_s^{-1} C_d is then one sparse product per level:
-the unknowns of a level depend only on those of earlier levels. The reduced residuals have
-the Jacobian J_d + J_s S, the inequalities (sector angles, multiplier margins, boundary MV
-assignment, sides against the mean side, bounds) the rows G_d + G_s S.
+level), and the state is ordered by level. The state's sensitivity S = -C_s^{-1} C_d is
+then one sparse product per level: the unknowns of a level depend only on those of earlier
+levels. The reduced residuals have the Jacobian J_d + J_s S, the inequalities (sector
+angles, multiplier margins, boundary MV assignment, sides against the mean side, bounds)
+the rows G_d + G_s S.
 
 Each iteration solves the damped, linearised problem
 
@@ -161,37 +162,55 @@ class _Sliced:
         return m
 
 
-class _LevelBlock:
-    """The marching equations of one level: ``rows`` (n_k,) and their ``unknowns``, with
-    C_s off the own unknowns (``off``, n_k x n_s, refilled in place) and C_d (n_k x n_d),
-    given as patterns with data = 1 + the index of each nonzero in G's."""
+class _Levels:
+    """S = ds/dd (n_s, n_d) level by level, the state ordered by level: the unknowns of
+    level k are the rows lo_k:hi_k of S, and S_k = -diag_k^-1 (C_d,k + C_s,k S[:lo_k]),
+    one sparse product W_k [I; S[:lo_k]] per level. The W_k share one data array,
+    refilled from G's nonzeros at each point. ``Cd`` (n_s x n_d) and ``Cs`` (n_s x n_s,
+    without the own unknowns) are the marching equations in level order as patterns with
+    data = 1 + the index of each nonzero in G's, ``bounds`` the (lo_k, hi_k) of each
+    level, ``diagonal`` (n_s,) the index in G of each equation's own unknown."""
 
-    def __init__(self, rows: np.ndarray, unknowns: np.ndarray, off: sp.csr_matrix,
-                 Cd: sp.csr_matrix):
-        self.rows, self.unknowns = rows, unknowns
-        self._off = off.copy()
-        self._off_index = off.data.astype(np.int64) - 1
-        Cd = Cd.tocoo()
-        self._cd = (Cd.row, Cd.col, Cd.data.astype(np.int64) - 1)
-        self._shape = (rows.size, Cd.shape[1])
+    def __init__(self, Cd: sp.csr_matrix, Cs: sp.csr_matrix, bounds: list[tuple[int, int]],
+                 diagonal: np.ndarray):
+        n_d = Cd.shape[1]
+        W = sp.hstack([Cd, Cs], format="csr")  # rows: equations in level order
+        W.sort_indices()
+        self._index = W.data.astype(np.int64) - 1
+        self._row = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
+        self._data = np.zeros(W.nnz)
+        self._diagonal = diagonal  # per equation (level order): its own unknown's index in G
+        self._blocks = []
+        for lo, hi in bounds:
+            start, stop = W.indptr[lo], W.indptr[hi]
+            block = sp.csr_matrix((W.data[start:stop], W.indices[start:stop],
+                                   W.indptr[lo:hi + 1] - start), shape=(hi - lo, n_d + lo))
+            block.data = self._data[start:stop]  # a view: refilled with the shared array
+            self._blocks.append((n_d + lo, n_d + hi, block))
+        self._shape = (n_d + Cs.shape[1], n_d)
 
-    def right_side(self, G: np.ndarray, S: np.ndarray) -> np.ndarray:
-        """C_d + C_s,off S over the block's rows (n_k, n_d), S holding earlier levels."""
-        out = np.zeros(self._shape)
-        row, col, index = self._cd
-        out[row, col] = G[index]
-        if self._off.nnz:
-            self._off.data[:] = G[self._off_index]
-            out += self._off @ S
-        return out
+    def __call__(self, G: np.ndarray) -> np.ndarray | None:
+        """S (n_s, n_d) at G's nonzeros; None where an own unknown's coefficient vanishes
+        or S is not finite."""
+        diagonal = G[self._diagonal]
+        if np.any(diagonal == 0):
+            return None
+        self._data[:] = G[self._index] * (-1.0 / diagonal)[self._row]
+        n_d = self._shape[1]
+        S = np.empty(self._shape)
+        S[:n_d] = np.eye(n_d)
+        for lo, hi, W in self._blocks:
+            S[lo:hi] = W @ S[:lo]
+        S = S[n_d:]
+        return S if np.all(np.isfinite(S)) else None
 
 
 class Manifold:
     """The simultaneous NLP split into its design and its marched state.
 
-    Built once per NLP: the index sets, the levels of the marching equations, and the
-    CasADi Functions of the residuals and constraints (trial points) and of their
-    Jacobians (accepted points).
+    Built once per NLP: the index sets (``state`` in the order of the levels of the
+    marching equations), the levels, and the CasADi Functions of the residuals and
+    constraints (trial points) and of their Jacobians (accepted points).
     """
 
     def __init__(self, nlp: NLP):
@@ -214,6 +233,7 @@ class Manifold:
         self._jacobians = _Buffered(ca.Function(
             "jacobians", [nlp.x],
             [ca.jacobian(nlp.residuals, nlp.x), ca.jacobian(nlp.g, nlp.x)]))
+        self._order_by_level()
         where = np.full(n, -1)
         where[self.state] = np.arange(self.state.size)
         pattern = np.zeros(n, dtype=bool)
@@ -229,9 +249,29 @@ class Manifold:
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
         self._slice_jacobians()
 
+    def _order_by_level(self) -> None:
+        """The matching of marching equations to state unknowns (``match``), their levels
+        (:meth:`_levels`), and the state reordered by level: the unknowns of each level
+        contiguous, in the order of its equations."""
+        Cs = self._jacobians.pattern(1).tocsr()[self.eq][:, self.state].tocsr()
+        match = maximum_bipartite_matching(Cs, perm_type="column")
+        if np.any(match < 0):
+            raise RuntimeError("the marching equations are structurally singular in the state")
+        self.match = match
+        Cs = Cs.tocoo()
+        own = Cs.col == match[Cs.row]
+        off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
+        level = self._levels(off)
+        self.levels = [np.flatnonzero(level == k) for k in range(level.max() + 1)]
+        order = match[np.concatenate(self.levels)]  # old state index of each new position
+        self.state = self.state[order]
+        position = np.empty_like(order)
+        position[order] = np.arange(order.size)
+        self.match = position[match]  # the unknown (state index) of each marching equation
+
     def _slice_jacobians(self) -> None:
-        """The fixed blocks of J and G, the matching of marching equations to state
-        unknowns and their levels (:meth:`_levels`)."""
+        """The fixed blocks of J and G, and the marching equations by level
+        (:class:`_Levels`)."""
         J = self._jacobians.pattern(0)
         G = self._jacobians.pattern(1).tocsr()
         self._J_design = _Sliced(J[:, self.design], "csc")
@@ -239,22 +279,14 @@ class Manifold:
         Gin = G[self.ineq]
         self._G_design = _Sliced(Gin[:, self.design])
         self._G_state = _Sliced(Gin[:, self.state])
-        Geq = G[self.eq]
-        Cs, Cd = Geq[:, self.state].tocsr(), Geq[:, self.design].tocsr()
-        match = maximum_bipartite_matching(Cs, perm_type="column")
-        if np.any(match < 0):
-            raise RuntimeError("the marching equations are structurally singular in the state")
-        self.match = match  # the unknown (state index) of each marching equation
-        Cs = Cs.tocoo()
-        own = Cs.col == match[Cs.row]
+        rows = self.eq[np.concatenate(self.levels)]  # in level order: row i owns unknown i
+        Cs, Cd = G[rows][:, self.state].tocoo(), G[rows][:, self.design].tocsr()
+        own = Cs.col == Cs.row
         diagonal = np.empty(Cs.shape[0], dtype=np.int64)
         diagonal[Cs.row[own]] = Cs.data[own].astype(np.int64) - 1
-        self._diagonal = diagonal
         off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
-        level = self._levels(off)
-        self.levels = [np.flatnonzero(level == k) for k in range(level.max() + 1)]
-        self._blocks = [_LevelBlock(rows, match[rows], off[rows], Cd[rows])
-                        for rows in self.levels]
+        sizes = np.cumsum([0] + [rows.size for rows in self.levels])
+        self._sensitivity = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
 
     def _levels(self, off: sp.csr_matrix) -> np.ndarray:
         """The level of each marching equation (n_eq,): 0 for one that uses no other
@@ -296,16 +328,10 @@ class Manifold:
                               G_design=self._G_design(G), G_state=self._G_state(G), S=S)
 
     def sensitivity(self, G: np.ndarray) -> np.ndarray | None:
-        """S = ds/dd (n_s, n_d) from C_s S = -C_d, level by level; ``G``: the nonzeros of
-        the constraints' Jacobian. None where an equation's own unknown has a zero
-        coefficient."""
-        diagonal = G[self._diagonal]
-        if np.any(diagonal == 0):
-            return None
-        S = np.zeros((self.state.size, self.design.size))
-        for block in self._blocks:
-            S[block.unknowns] = -block.right_side(G, S) / diagonal[block.rows, None]
-        return S if np.all(np.isfinite(S)) else None
+        """S = ds/dd (n_s, n_d) from C_s S = -C_d, level by level (:class:`_Levels`);
+        ``G``: the nonzeros of the constraints' Jacobian. None where an equation's own
+        unknown has a zero coefficient."""
+        return self._sensitivity(G)
 
     def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The inequality rows of the reduced problem at (g, x): g's inequality rows, then

@@ -10,7 +10,9 @@ process with the given numbers of OpenBLAS threads (default 1 and 2):
 * ``baseline``: the default solve of the code at ``--baseline`` (a git revision, exported
   to a temporary folder with ``git archive``; default: the commit before this solver),
   whose Levenberg-Marquardt stopped when a step gained less than 0.01% and handed over to
-  IPOPT.
+  IPOPT;
+* ``previous`` (with ``--previous REV``): the default solve of the code at that git
+  revision, to compare a change of the default solve with the code before it in one run.
 
 The yardstick, measured in this run: one forward evaluation of the NumPy model
 (``numpy_model.march`` of the problem's starting Miura + ``numpy_model.fold`` at omega0),
@@ -22,7 +24,7 @@ Then one default solve per target runs under cProfile (in a child, ``--threads``
 value), and so does the baseline's: the time spent in the solver's parts.
 
 Usage: ``python studies/bench_default_solve.py [--n 20] [--threads 1,2] [--repeat 1]
-[--baseline REV] [--out studies/results/bench_default_solve.md]``;
+[--baseline REV] [--previous REV] [--out studies/results/bench_default_solve.md]``;
 ``--smoke``: 4 x 4 panels, one thread, no baseline, output to a temporary folder.
 """
 
@@ -151,16 +153,20 @@ def main() -> None:
     parser.add_argument("--threads", default="1,2")
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--baseline", default=BASELINE)
+    parser.add_argument("--previous", default=None)
     parser.add_argument("--out", type=Path, default=RESULTS / "bench_default_solve.md")
     add_smoke(parser)
     args = parser.parse_args()
     if args.smoke:
-        args.n, args.threads, args.baseline = 4, "1", None
+        args.n, args.threads, args.baseline, args.previous = 4, "1", None, None
         args.out = smoke_dir("bench_default_solve") / "bench_default_solve.md"
     threads = [int(t) for t in args.threads.split(",")]
     run = Run()
     forward = {name: forward_time(name, args.n, args.repeat) for name in TARGETS}
-    packages = {"default": ROOT, "ipopt": ROOT}
+    packages = {"default": ROOT}
+    if args.previous:  # right after the default: the two rows see the same load
+        packages["previous"] = export_baseline(args.previous)
+    packages["ipopt"] = ROOT
     if args.baseline:
         packages["baseline"] = export_baseline(args.baseline)
     rows = []
