@@ -8,7 +8,7 @@ constraints) from the same Miura start. Reported: the loss (with that run's own 
 start and end and its reduction, the RMS distance of the aligned coarse lattice to the target
 lattice (Kabsch, relative to the target's diameter) at start and end, the same RMS after
 removing each parity class's mean offset (the sideways offsets the forms loss is blind to,
-PAPER_NOTES s.8), the paper's forms misfit (the mean square of the forms residuals, weight 1)
+docs/paper.md s.8), the paper's forms misfit (the mean square of the forms residuals, weight 1)
 at start and end, iterations, time and IPOPT's status.
 
     python studies/loss_choice.py [--sizes 8 12] [--time-limit 60]
@@ -147,7 +147,7 @@ def main() -> None:
         "- RMS/diam: RMS distance of the coarse lattice r(i,j) = y^(2i)(2j), rigidly aligned "
         "(Kabsch), to the target lattice, over the target's diameter; 'parity-corrected': the "
         "same after also removing each of the four parity classes' (i mod 2, j mod 2) mean "
-        "offset (what the forms loss cannot see, PAPER_NOTES s.8); 'boundary ring': RMS over "
+        "offset (what the forms loss cannot see, docs/paper.md s.8); 'boundary ring': RMS over "
         "the outermost lattice rows and columns under the same alignment; 'interior only': "
         "Kabsch alignment and RMS over the (N-1) x (M-1) interior points, where the forms "
         "are evaluated (a boundary point enters the forms only through its neighbours' "
