@@ -76,6 +76,13 @@ SAFETY = 2.0
 #: Separating-axis gaps below this times the pattern's scale count as touching.
 REL_EPS = 1e-12
 
+#: The broad phase queries the panels larger than the 90th percentile of the radii apart
+#: only when the largest radius exceeds this times that percentile.
+SPLIT = 2.0
+
+#: Panel pairs per batch of the bounds and distances along the motion.
+BATCH = 2048
+
 #: Triangle pairs per vectorised batch of the narrow phase (bounds its memory).
 CHUNK = 4096
 
@@ -140,8 +147,10 @@ class _Geometry:
     Panels are numbered p = (i-1) M + (j-1); ``corners`` (P, 4) holds the flat vertex
     indices of a, b, c, d; ``radius`` (P,) the distance from a panel's centroid to its
     farthest corner (constant: panels are rigid); ``big`` the panels whose radius exceeds
-    ``rho`` (about the 90th percentile: the broad phase queries them apart), ``is_big``
-    (P,) its mask.
+    ``rho``, ``is_big`` (P,) its mask: when the largest radius exceeds SPLIT times their
+    90th percentile, ``rho`` is that percentile and the broad phase queries the big panels
+    apart (patterns of very unequal panels); else ``rho`` is the largest radius and
+    ``big`` is empty (one tree query is cheaper than two).
     """
 
     def __init__(self, pat: Pattern):
@@ -154,7 +163,8 @@ class _Geometry:
         Q = X[self.corners]
         self.radius = np.linalg.norm(Q - Q.mean(axis=1, keepdims=True), axis=2).max(axis=1)
         self.scale = float(np.ptp(X, axis=0).max()) or 1.0
-        self.rho = float(np.quantile(self.radius, 0.9)) * (1 + 1e-6)
+        r90 = float(np.quantile(self.radius, 0.9))
+        self.rho = (r90 if self.radius.max() > SPLIT * r90 else self.radius.max()) * (1 + 1e-6)
         self.is_big = self.radius > self.rho
         self.big = np.flatnonzero(self.is_big)
 
@@ -487,10 +497,14 @@ def _at(X: np.ndarray, s: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def _per_state(f, st: _States, s, p, q) -> np.ndarray:
-    """f(st, s, p, q) (n,) computed once for each distinct (state, pair) among the n."""
+    """f(st, s, p, q) (n,) computed once for each distinct (state, pair) among the n, in
+    batches of ``BATCH`` (their temporaries stay in cache)."""
     P = st.geo.N * st.geo.M
     first, inv = _distinct((s * P + p) * P + q)
-    return f(st, s[first], p[first], q[first])[inv]
+    s, p, q = s[first], p[first], q[first]
+    out = [f(st, s[k:k + BATCH], p[k:k + BATCH], q[k:k + BATCH])
+           for k in range(0, len(s), BATCH)]
+    return np.concatenate(out or [np.zeros(0)])[inv]
 
 
 def _distinct(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
