@@ -80,6 +80,9 @@ REL_EPS = 1e-12
 #: only when the largest radius exceeds this times that percentile.
 SPLIT = 2.0
 
+#: Rows of a state's panel table (:class:`_States`).
+_ROWS = 19
+
 #: Panel pairs per batch of the bounds and distances along the motion.
 BATCH = 2048
 
@@ -418,26 +421,61 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
 class _States:
     """The folded states visited along the motion, grown as steps are halved.
 
-    ``omegas``: their |omega| (a list, K entries); ``Q`` (K, P, 4, 3): every panel's
-    corners a, b, c, d; ``C`` (K, P, 3): the panels' centroids; ``n`` (K, P, 3): their
-    unit normals.
+    ``omegas``: their |omega| (a list, K entries); ``T`` (K, 19, P): each state's panel
+    table, one row per quantity (gathers by column are several times faster than by
+    panel): row 4 c + k the coordinate c of corner k (a, b, c, d), rows 12-14 the
+    centroid, 15-17 the unit normal, 18 the radius. Its storage doubles as states are
+    added (halving steps adds a few states at a time).
     """
 
     def __init__(self, geo: _Geometry, sign: float, omegas: np.ndarray):
-        P = geo.N * geo.M
         self.geo, self.sign, self.omegas = geo, sign, []
-        self.Q, self.C, self.n = np.zeros((0, P, 4, 3)), np.zeros((0, P, 3)), np.zeros((0, P, 3))
+        self._T = np.zeros((0, _ROWS, geo.N * geo.M))
         self.add(omegas)
+
+    @property
+    def T(self) -> np.ndarray:
+        """The panel tables (K, 19, P) of the states so far (a contiguous view)."""
+        return self._T[:len(self.omegas)]
 
     def add(self, omegas: np.ndarray) -> None:
         """Fold the pattern at the |omega| values (k,) and append those states."""
         omegas = np.asarray(omegas, dtype=float)
-        Q = self.geo.states(self.sign * omegas)[:, self.geo.corners]
-        n = _cross(Q[:, :, 3] - Q[:, :, 0], Q[:, :, 2] - Q[:, :, 1])
+        K, k = len(self.omegas), len(omegas)
+        if K + k > len(self._T):
+            grown = np.empty((max(2 * len(self._T), K + k), *self._T.shape[1:]))
+            grown[:K] = self._T[:K]
+            self._T = grown
+        Y = self.geo.states(self.sign * omegas).transpose(0, 2, 1)      # (k, 3, V)
+        T = self._T[K:K + k]
+        X = Y[:, :, self.geo.corners.T]                                  # (k, 3, 4, P)
+        T[:, :12] = X.reshape(k, 12, -1)
+        T[:, 12:15] = (X[:, :, 0] + X[:, :, 1] + X[:, :, 2] + X[:, :, 3]) / 4
+        u, v = X[:, :, 3] - X[:, :, 0], X[:, :, 2] - X[:, :, 1]          # (k, 3, P)
+        n = np.stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1], u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+                      u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
+        T[:, 15:18] = n / np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)[:, None]
+        T[:, 18] = self.geo.radius
         self.omegas.extend(omegas.tolist())
-        self.Q = np.concatenate([self.Q, Q])
-        self.C = np.concatenate([self.C, _centroid(Q)])
-        self.n = np.concatenate([self.n, n / _norm(n)[..., None]])
+
+
+def _columns(st: _States, s: np.ndarray, p: np.ndarray, rows: slice = slice(0, 19)) -> np.ndarray:
+    """The table rows ``rows`` (r, n) of panels p in states s (both (n,)): one np.take on
+    the flattened tables."""
+    T = st.T
+    R, P = T.shape[1:]
+    at = np.arange(R)[rows] * P
+    return T.reshape(-1).take((s * (R * P) + p)[None] + at[:, None], mode="clip")
+
+
+def _quads(st: _States, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Corners (n, 4, 3) of panels p in states s (both (n,))."""
+    return np.ascontiguousarray(_columns(st, s, p, slice(0, 12)).reshape(3, 4, -1).T)
+
+
+def _normals(st: _States, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Unit normals (n, 3) of panels p in states s (both (n,))."""
+    return np.ascontiguousarray(_columns(st, s, p, slice(15, 18)).T)
 
 
 def _motion(st: _States, ia, ib, p, q) -> np.ndarray:
@@ -445,11 +483,11 @@ def _motion(st: _States, ia, ib, p, q) -> np.ndarray:
     state ib (all (n,)): the smallest of the largest displacement of a vertex of q
     relative to a vertex of p (16 vertex pairs) and the largest displacement of a vertex
     of one panel in the frame of the other (4 vertices, both ways)."""
-    Pa, Pb, Qa, Qb = (_at(st.Q, s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
+    Pa, Pb, Qa, Qb = (_quads(st, s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
     dP, dQ = Pb - Pa, Qb - Qa                                        # (n, 4, 3)
     m = _most(_norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
     for A, B, C, D, x in ((Pa, Pb, Qa, Qb, p), (Qa, Qb, Pa, Pb, q)):   # C, D in A's frame
-        La, Lb = _local(A, _at(st.n, ia, x), C), _local(B, _at(st.n, ib, x), D)
+        La, Lb = _local(A, _normals(st, ia, x), C), _local(B, _normals(st, ib, x), D)
         m = np.minimum(m, _most(_norm(Lb - La)))
     return m
 
@@ -471,29 +509,25 @@ def _lower_bound(st: _States, s, p, q) -> np.ndarray:
     the largest of the bounding spheres' gap, the plane gap (how far one panel lies
     wholly on one side of the other's plane) and the gap between the panels' projections
     on the line through their centroids (a separating axis that certifies most pairs of
-    nearly flat or nearly parallel neighbours)."""
-    P, Q = _at(st.Q, s, p), _at(st.Q, s, q)                         # (n, 4, 3)
-    u = _at(st.C, s, q) - _at(st.C, s, p)
-    dist = _norm(u)
-    lb = dist - st.geo.radius[p] - st.geo.radius[q]
-    for A, B, nA in ((P, Q, _at(st.n, s, p)), (Q, P, _at(st.n, s, q))):
-        h = _dot(B - A[:, :1], nA[:, None])                         # (n, 4)
-        lb = np.maximum(lb, np.maximum(_least(h), -_most(h)))
+    nearly flat or nearly parallel neighbours). Computed row by row on the panel tables."""
+    A, B = _columns(st, s, p), _columns(st, s, q)                   # (19, n)
+    u = B[12:15] - A[12:15]
+    dist = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    lb = dist - A[18] - B[18]
+    for F, G in ((A, B), (B, A)):                # G's corners over F's plane, from F's a
+        h = [F[15] * (G[k] - F[0]) + F[16] * (G[4 + k] - F[4]) + F[17] * (G[8 + k] - F[8])
+             for k in range(4)]
+        lb = np.maximum(lb, np.maximum(_least_of(h), -_most_of(h)))
     with np.errstate(divide="ignore", invalid="ignore"):
-        u /= dist[:, None]
-    gap = _least(_dot(Q, u[:, None])) - _most(_dot(P, u[:, None]))  # along the centres
+        u /= dist
+    along = [[u[0] * F[k] + u[1] * F[4 + k] + u[2] * F[8 + k] for k in range(4)] for F in (A, B)]
+    gap = _least_of(along[1]) - _most_of(along[0])                 # along the centres
     return np.maximum(lb, np.where(dist > 0, gap, -np.inf))
 
 
 def _distance(st: _States, s, p, q) -> np.ndarray:
     """Exact distances (n,) of panels p and q in states s (all (n,))."""
-    return _quad_distance(_at(st.Q, s, p), _at(st.Q, s, q), st.geo.scale)
-
-
-def _at(X: np.ndarray, s: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """X[s, p] (n, ...) of a contiguous X (K, P, ...): np.take on the flattened leading
-    axes, several times faster than fancy indexing."""
-    return np.take(X.reshape(-1, *X.shape[2:]), s * X.shape[1] + p, axis=0, mode="clip")
+    return _quad_distance(_quads(st, s, p), _quads(st, s, q), st.geo.scale)
 
 
 def _per_state(f, st: _States, s, p, q) -> np.ndarray:
@@ -552,6 +586,22 @@ def _most(x: np.ndarray) -> np.ndarray:
     return out
 
 
+def _least_of(xs: list[np.ndarray]) -> np.ndarray:
+    """Elementwise minimum of the arrays xs (all (n,))."""
+    out = xs[0]
+    for x in xs[1:]:
+        out = np.minimum(out, x)
+    return out
+
+
+def _most_of(xs: list[np.ndarray]) -> np.ndarray:
+    """Elementwise maximum of the arrays xs (all (n,))."""
+    out = xs[0]
+    for x in xs[1:]:
+        out = np.maximum(out, x)
+    return out
+
+
 def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
                  clearance: float) -> tuple[np.ndarray, np.ndarray]:
     """Rows (n, 4) = (state a, state b, p, q): for every step between the K coarse states
@@ -561,18 +611,20 @@ def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
     displacement plus each panel's largest vertex displacement about its centre (at least
     :func:`_motion`'s)."""
     P = geo.N * geo.M
-    C = st.C[:K]
-    dC = C[1:] - C[:-1]                                              # (K-1, P, 3)
-    spin = _most(_norm(st.Q[1:K] - st.Q[:K - 1] - dC[:, :, None]))  # (K-1, P)
+    C = st.T[:K, 12:15]                                              # (K, 3, P)
+    dC = C[1:] - C[:-1]
+    Q = st.T[:K, :12].reshape(K, 3, 4, P)
+    dQ = Q[1:] - Q[:-1] - dC[:, :, None]                             # (K-1, 3, 4, P)
+    spin = _most_of(list(np.sqrt(dQ[:, 0] ** 2 + dQ[:, 1] ** 2 + dQ[:, 2] ** 2).transpose(1, 0, 2)))
     f32 = np.float32                             # the broad phase only, with a slack eps:
     eps = _slack(geo, C)                         # gaps - eps, bounds + eps are safe
     Cx = np.concatenate([C[:1], C, C[-1:]]).astype(f32)              # C[k -+ 1], ends padded
     sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))]).astype(f32)
     near = []                    # per state k: p, q, gaps at k - 1, k, k + 1, bounds m
     for k in range(K):           # of the steps before and after k
-        T = _table(geo, C[k], f32)
+        T = _table(geo, C[k].T, f32)
         p, q, g = _near(geo, T, margin + eps)
-        X = np.concatenate([T[:4], Cx[k].T, Cx[k + 2].T, sx[k:k + 2]])   # (12, P)
+        X = np.concatenate([T[:4], Cx[k], Cx[k + 2], sx[k:k + 2]])       # (12, P)
         A, B = X.take(p, axis=1, mode="clip"), X.take(q, axis=1, mode="clip")
         m = [SAFETY * (_shift(A, B, a, b) + A[s] + B[s]) for a, b, s in ((4, 0, 10),
                                                                         (0, 7, 11))]

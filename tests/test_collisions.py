@@ -243,8 +243,9 @@ def test_cheap_bounds_hold_on_the_random_recipe():
         tight += np.sum(lb > 0.5 * d)
     assert tight > 0.5 * 11 * len(p)              # and it is not a trivial bound
     a, b = np.full(len(p), 3), np.full(len(p), 4)
-    dP = states.Q[4, p] - states.Q[3, p]
-    dQ = states.Q[4, q] - states.Q[3, q]
+    Q = geo.states(np.array(states.omegas))[:, geo.corners]          # (11, P, 4, 3)
+    dP = Q[4, p] - Q[3, p]
+    dQ = Q[4, q] - Q[3, q]
     brute = np.linalg.norm(dQ[:, None, :, :] - dP[:, :, None, :], axis=3).max(axis=(1, 2))
     m = _motion(states, a, b, p, q)
     change = np.abs(_distance(states, b, p, q) - _distance(states, a, p, q))
@@ -268,7 +269,8 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(clearance):
     p, q = np.triu_indices(pat.N * pat.M, 1)
     keep = non_adjacent(geo, p, q)
     p, q = p[keep], q[keep]
-    C, Q, r = states.C, states.Q, geo.radius
+    Q = geo.states(np.array(states.omegas))[:, geo.corners]          # (K, P, 4, 3)
+    C, r = Q.mean(axis=2), geo.radius
     expected = 0
     for k in range(K - 1):
         g0 = np.linalg.norm(C[k, p] - C[k, q], axis=1) - r[p] - r[q]
