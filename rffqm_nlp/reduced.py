@@ -13,11 +13,15 @@ point into preallocated buffers (trial points evaluate only r and g). The marchi
 equations are explicit (each computes one new quantity from earlier ones), so their
 Jacobian in s is triangular after a permutation, found once from its sparsity (a matching
 of equations to unknowns, then the longest chain of dependencies of each equation, its
-level), and the state is ordered by level. The state's sensitivity S = -C_s^{-1} C_d is
-then one sparse product per level: the unknowns of a level depend only on those of earlier
-levels. The reduced residuals have the Jacobian J_d + J_s S, the inequalities (sector
-angles, multiplier margins, boundary MV assignment, sides against the mean side, bounds)
-the rows G_d + G_s S.
+level), and the state is ordered by level. The state's sensitivity S = -C_s^{-1} C_d
+(n_s x n_d) then follows level by level: the unknowns of a level depend only on those of
+earlier levels. S is never stored whole. One pass over the levels (:class:`_Window`) keeps
+only the rows of S that a later level or a residual still needs (a working set that shrinks,
+relative to the state, as the pattern grows) and reduces them at once into the
+n_d x n_d matrices the step needs: J' J of the reduced Jacobian J = J_d + J_s S, the
+gradient J' r and the metric below. The inequality rows G_d + G_s S that a step needs come
+from the sweep backwards through the levels (S' applied to their state parts), and every
+row's change under a step from one forward sweep (S dd).
 
 Each iteration solves the damped, linearised problem
 
@@ -67,8 +71,10 @@ FEASIBLE = 1e-9
 CORRECTIONS = 3
 #: damping above which no step is found: the run stops with status "Stalled"
 MAX_DAMPING = 1e10
-#: rows of S per block of the metric's product
-ROWS = 65536
+#: entries (rows x state) of a block of rows swept back at once (:meth:`_Steps.rows`)
+BLOCK = 1 << 24
+#: rows gathered before one update of J' J or of the metric (:class:`_Gram`)
+GRAM_ROWS = 1024
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: statuses of a run that ended where it should
@@ -112,15 +118,29 @@ class _Point:
 
 @dataclass
 class _Linearization:
-    """The Jacobians of r and g at a point, split by design (n_d) and state (n_s) columns:
-    J_design (n_r, n_d) dense, J_state (n_r, n_s), the inequality rows' G_design and
-    G_state (n_i, .), and the sensitivity S (n_s, n_d)."""
+    """The derivatives at a point: the sparse Jacobians of r and g split by design (n_d)
+    and state (n_s) columns (J_design, J_state; the inequality rows' G_design, G_state),
+    the sweeps through the marching equations there (``levels``: S = ds/dd applied to a
+    block, and its transpose), and the reduced problem's J' J, J' r and the metric's
+    S_p' D_p S_p (n_d x n_d, n_d), accumulated level by level (:class:`_Window`) without S.
+    Valid until the manifold linearises at the next point (``levels`` is refilled there)."""
 
-    J_design: np.ndarray
+    J_design: sp.csr_matrix
     J_state: sp.csr_matrix
     G_design: sp.csr_matrix
     G_state: sp.csr_matrix
-    S: np.ndarray
+    levels: "_Levels"
+    JtJ: np.ndarray
+    grad: np.ndarray
+    pattern_metric: np.ndarray
+
+    def jacobian_transpose(self, w: np.ndarray) -> np.ndarray:
+        """Jr' w (n_d,) for w (n_r,), Jr = J_design + J_state S the reduced Jacobian."""
+        return self.J_design.T @ w + self.levels.adjoint(self.J_state.T @ w)
+
+    def state_change(self, dd: np.ndarray) -> np.ndarray:
+        """S dd (n_s,): the state's first-order change under the design change dd (n_d,)."""
+        return self.levels.forward(dd)
 
 
 class _Buffered:
@@ -163,46 +183,228 @@ class _Sliced:
 
 
 class _Levels:
-    """S = ds/dd (n_s, n_d) level by level, the state ordered by level: the unknowns of
-    level k are the rows lo_k:hi_k of S, and S_k = -diag_k^-1 (C_d,k + C_s,k S[:lo_k]),
-    one sparse product W_k [I; S[:lo_k]] per level. The W_k share one data array,
-    refilled from G's nonzeros at each point. ``Cd`` (n_s x n_d) and ``Cs`` (n_s x n_s,
-    without the own unknowns) are the marching equations in level order as patterns with
-    data = 1 + the index of each nonzero in G's, ``bounds`` the (lo_k, hi_k) of each
-    level, ``diagonal`` (n_s,) the index in G of each equation's own unknown."""
+    """The marching equations in level order, s = W_d d + W_s s with W_s strictly lower
+    triangular by levels: the unknowns of level k are the state rows lo_k:hi_k and
+    s_k = W_k [d; s[:lo_k]], W_k = -diag_k^-1 [C_d,k  C_s,k] (C without the own unknowns).
+    The W_k share one data array, refilled from G's nonzeros at each point (:meth:`refill`).
+
+    ``Cd`` (n_s x n_d) and ``Cs`` (n_s x n_s, without the own unknowns) are the marching
+    equations in level order as patterns with data = 1 + the index of each nonzero in G's,
+    ``bounds`` the (lo_k, hi_k) of each level, ``diagonal`` (n_s,) the index in G of each
+    equation's own unknown. S = ds/dd is never stored: :meth:`forward` applies it to a
+    block, :meth:`adjoint` its transpose, and :class:`_Window` accumulates its products."""
 
     def __init__(self, Cd: sp.csr_matrix, Cs: sp.csr_matrix, bounds: list[tuple[int, int]],
                  diagonal: np.ndarray):
-        n_d = Cd.shape[1]
+        self.n_d, self.n_s = Cd.shape[1], Cs.shape[1]
         W = sp.hstack([Cd, Cs], format="csr")  # rows: equations in level order
         W.sort_indices()
+        self.W = W  # the pattern, data = 1 + index in G
         self._index = W.data.astype(np.int64) - 1
         self._row = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
-        self._data = np.zeros(W.nnz)
+        self.data = np.zeros(W.nnz)
         self._diagonal = diagonal  # per equation (level order): its own unknown's index in G
-        self._blocks = []
-        for lo, hi in bounds:
-            start, stop = W.indptr[lo], W.indptr[hi]
-            block = sp.csr_matrix((W.data[start:stop], W.indices[start:stop],
-                                   W.indptr[lo:hi + 1] - start), shape=(hi - lo, n_d + lo))
-            block.data = self._data[start:stop]  # a view: refilled with the shared array
-            self._blocks.append((n_d + lo, n_d + hi, block))
-        self._shape = (n_d + Cs.shape[1], n_d)
+        self.bounds = bounds
+        self.blocks = [self.block(lo, hi, W.indices[W.indptr[lo]:W.indptr[hi]], self.n_d + lo)
+                       for lo, hi in bounds]
+        self._transposed()
 
-    def __call__(self, G: np.ndarray) -> np.ndarray | None:
-        """S (n_s, n_d) at G's nonzeros; None where an own unknown's coefficient vanishes
-        or S is not finite."""
+    def block(self, lo: int, hi: int, columns: np.ndarray, width: int) -> sp.csr_matrix:
+        """W_k of the level lo:hi with its nonzeros' columns given (same order as W's) and
+        ``width`` columns; its data a view of the shared array, refilled with it."""
+        start, stop = self.W.indptr[lo], self.W.indptr[hi]
+        block = sp.csr_matrix((self.data[start:stop], columns, self.W.indptr[lo:hi + 1] - start),
+                              shape=(hi - lo, width))
+        block.data = self.data[start:stop]  # a view (the constructor may have copied)
+        return block
+
+    def _transposed(self) -> None:
+        """W_k' restricted to the columns W_k uses, for :meth:`adjoint` (a transposed block
+        over all earlier columns would cost a pass over the whole state per level): per
+        level (used columns, W_k' (their number, rows)), the data views of one array
+        refilled as ``data[_tperm]``."""
+        W, perm, parts = self.W, [], []
+        for lo, hi in self.bounds:
+            start, stop = W.indptr[lo], W.indptr[hi]
+            row = np.repeat(np.arange(hi - lo), np.diff(W.indptr[lo:hi + 1]))
+            columns, used = np.unique(W.indices[start:stop], return_inverse=True)
+            order = np.lexsort((row, used))
+            perm.append(start + order)
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(used, minlength=columns.size))])
+            parts.append((columns, row[order], indptr, hi - lo))
+        self._tperm = np.concatenate(perm) if perm else np.zeros(0, dtype=np.int64)
+        self._tdata = np.zeros(self._tperm.size)
+        self.transposed, k = [], 0
+        for columns, row, indptr, rows in parts:
+            T = sp.csr_matrix((self._tdata[k:k + row.size], row, indptr),
+                              shape=(columns.size, rows))
+            T.data = self._tdata[k:k + row.size]  # a view, refilled with the array
+            self.transposed.append((columns, T))
+            k += row.size
+
+    def refill(self, G: np.ndarray) -> bool:
+        """W at G's nonzeros (the constraints' Jacobian); False where an equation's own
+        unknown has a zero coefficient (the march no longer determines it)."""
         diagonal = G[self._diagonal]
         if np.any(diagonal == 0):
-            return None
-        self._data[:] = G[self._index] * (-1.0 / diagonal)[self._row]
-        n_d = self._shape[1]
-        S = np.empty(self._shape)
-        S[:n_d] = np.eye(n_d)
-        for lo, hi, W in self._blocks:
-            S[lo:hi] = W @ S[:lo]
-        S = S[n_d:]
-        return S if np.all(np.isfinite(S)) else None
+            return False
+        self.data[:] = G[self._index] * (-1.0 / diagonal)[self._row]
+        self._tdata[:] = self.data[self._tperm]
+        return True
+
+    def forward(self, X: np.ndarray) -> np.ndarray:
+        """S X (n_s,) or (n_s, p) for X (n_d,) or (n_d, p): the level-by-level sweep."""
+        Y = np.empty((self.n_d + self.n_s,) + X.shape[1:])
+        Y[:self.n_d] = X
+        for (lo, hi), W in zip(self.bounds, self.blocks):
+            Y[self.n_d + lo:self.n_d + hi] = W @ Y[:self.n_d + lo]
+        return Y[self.n_d:]
+
+    def adjoint(self, Y: np.ndarray) -> np.ndarray:
+        """S' Y (n_d,) or (n_d, p) for Y (n_s,) or (n_s, p): the sweep backwards."""
+        Z = np.zeros((self.n_d + self.n_s,) + Y.shape[1:])
+        Z[self.n_d:] = Y
+        for (lo, hi), (columns, T) in zip(reversed(self.bounds), reversed(self.transposed)):
+            Z[columns] += T @ Z[self.n_d + lo:self.n_d + hi]
+        return Z[:self.n_d]
+
+
+class _Window:
+    """J' J, J' r and S_p' D_p S_p of the reduced problem in one pass over the levels,
+    holding only the rows of S still needed (the working set) instead of all of S.
+
+    Each state row gets a slot in a pool (``pool`` rows) from its level until the last
+    level that uses it: the marching equations of a later level, or a residual row, which
+    is reduced at the level of its latest state unknown (residual rows that use no state
+    come first). A slot freed is reused by a later level. Static: built once from the
+    sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in level order) has
+    data = 1 + the index of each nonzero in the residuals' Jacobian. ``pattern`` (state
+    rows) and ``weights`` are the metric's rows and their D."""
+
+    def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
+                 weights: np.ndarray):
+        n_d, n_s = levels.n_d, levels.n_s
+        self.levels = levels
+        level = np.empty(n_s, dtype=np.int64)
+        for k, (lo, hi) in enumerate(levels.bounds):
+            level[lo:hi] = k
+        J = J.tocsr()
+        J.sort_indices()
+        last = level.copy()  # the last level that uses each state row
+        W = levels.W
+        uses = W.indices >= n_d
+        np.maximum.at(last, W.indices[uses] - n_d, level[np.repeat(
+            np.arange(n_s), np.diff(W.indptr))[uses]])
+        Jcoo = J.tocoo()
+        state = Jcoo.col >= n_d
+        at = np.full(J.shape[0], -1, dtype=np.int64)  # the level each residual row is reduced
+        np.maximum.at(at, Jcoo.row[state], level[Jcoo.col[state] - n_d])
+        np.maximum.at(last, Jcoo.col[state] - n_d, at[Jcoo.row[state]])
+        slot = self._slots(levels.bounds, last)
+        self.pool = int(slot.max()) + 1 if n_s else 0
+        column = np.concatenate([np.arange(n_d), n_d + slot])  # design + state -> pool row
+        width = n_d + self.pool
+        self._slot = slot
+        self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
+                        for lo, hi in levels.bounds]
+        order = np.argsort(at, kind="stable")
+        bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
+        self._residuals = {}  # level -> (rows, J's rows in pool columns, nonzeros' index)
+        for k, lo, hi in zip(range(-1, len(levels.bounds)), bounds[:-1], bounds[1:]):
+            if hi > lo:
+                rows = order[lo:hi]
+                block = J[rows]
+                index = block.data.astype(np.int64) - 1
+                block = sp.csr_matrix((np.zeros(block.nnz), column[block.indices],
+                                       block.indptr), shape=(rows.size, width))
+                self._residuals[k] = (rows, block, index)
+        is_pattern = np.zeros(n_s, dtype=bool)
+        is_pattern[pattern] = True
+        root = np.zeros(n_s)
+        root[pattern] = np.sqrt(weights)
+        self._pattern = [(np.flatnonzero(is_pattern[lo:hi]), root[lo:hi][is_pattern[lo:hi]])
+                         for lo, hi in levels.bounds]
+
+    @staticmethod
+    def _slots(bounds: list[tuple[int, int]], last: np.ndarray) -> np.ndarray:
+        """A pool slot for every state row (n_s,): the rows of level k take the slots of
+        the rows whose last use was before k, then new ones."""
+        slot = np.empty(last.size, dtype=np.int64)
+        order = np.argsort(last, kind="stable")
+        ends = np.searchsorted(last[order], np.arange(len(bounds)), "right")
+        free, size, freed_to = np.zeros(0, dtype=np.int64), 0, 0
+        for k, (lo, hi) in enumerate(bounds):
+            if k > 0:  # rows last used at level k - 1 free their slots
+                free = np.concatenate([free, slot[order[freed_to:ends[k - 1]]]])
+                freed_to = ends[k - 1]
+            take = min(free.size, hi - lo)
+            fresh = np.arange(size, size + hi - lo - take)
+            slot[lo:hi] = np.concatenate([free[:take], fresh])
+            free, size = free[take:], size + fresh.size
+        return slot
+
+    def __call__(self, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """(J' J, J' r, S_p' D_p S_p) at the residuals' Jacobian nonzeros J and residuals
+        r (n_r,), with the levels refilled at the same point; None where they are not
+        finite."""
+        n_d = self.levels.n_d
+        pool = np.zeros((n_d + self.pool, n_d))  # [I; the working set of S]
+        pool[:n_d] = np.eye(n_d)
+        JtJ, M, grad = _Gram(n_d), _Gram(n_d), np.zeros(n_d)
+        self._reduce(-1, pool, J, r, JtJ, grad)
+        for k, ((lo, hi), W, (mine, root)) in enumerate(zip(self.levels.bounds, self._blocks,
+                                                            self._pattern)):
+            S = W @ pool
+            pool[n_d + self._slot[lo:hi]] = S
+            M.add(S[mine] * root[:, None])
+            self._reduce(k, pool, J, r, JtJ, grad)
+        out = JtJ.total(), grad, M.total()
+        return out if all(np.all(np.isfinite(a)) for a in out) else None
+
+    def _reduce(self, k: int, pool: np.ndarray, J: np.ndarray, r: np.ndarray,
+                JtJ: "_Gram", grad: np.ndarray) -> None:
+        """The residual rows reduced at level k added to J' J and J' r (in place)."""
+        if k in self._residuals:
+            rows, block, index = self._residuals[k]
+            block.data[:] = J[index]
+            Jr = block @ pool
+            grad += Jr.T @ r[rows]
+            JtJ.add(Jr)
+
+
+class _Gram:
+    """A' A (n x n) of rows A added a block at a time: gathered into a buffer of
+    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle."""
+
+    def __init__(self, n: int):
+        self._upper = np.zeros((n, n), order="F")
+        self._buffer = np.empty((GRAM_ROWS, n))
+        self._used = 0
+
+    def add(self, rows: np.ndarray) -> None:
+        """Add rows (k, n)."""
+        if self._used + rows.shape[0] > GRAM_ROWS:
+            self._flush()
+        if rows.shape[0] > GRAM_ROWS:
+            self._syrk(rows)
+            return
+        self._buffer[self._used:self._used + rows.shape[0]] = rows
+        self._used += rows.shape[0]
+
+    def total(self) -> np.ndarray:
+        """The symmetric sum (n, n)."""
+        self._flush()
+        upper = self._upper
+        return np.triu(upper) + np.triu(upper, 1).T
+
+    def _flush(self) -> None:
+        if self._used:
+            self._syrk(self._buffer[:self._used])
+            self._used = 0
+
+    def _syrk(self, rows: np.ndarray) -> None:
+        self._upper = la.blas.dsyrk(1.0, rows.T, beta=1.0, c=self._upper, trans=0, lower=0,
+                                    overwrite_c=1)
 
 
 class Manifold:
@@ -270,12 +472,12 @@ class Manifold:
         self.match = position[match]  # the unknown (state index) of each marching equation
 
     def _slice_jacobians(self) -> None:
-        """The fixed blocks of J and G, and the marching equations by level
-        (:class:`_Levels`)."""
-        J = self._jacobians.pattern(0)
+        """The fixed blocks of J and G, the marching equations by level (:class:`_Levels`)
+        and the pass that reduces J and the metric through them (:class:`_Window`)."""
+        J = self._jacobians.pattern(0).tocsr()
         G = self._jacobians.pattern(1).tocsr()
-        self._J_design = _Sliced(J[:, self.design], "csc")
-        self._J_state = _Sliced(J[:, self.state].tocsr())
+        self._J_design = _Sliced(J[:, self.design])
+        self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]
         self._G_design = _Sliced(Gin[:, self.design])
         self._G_state = _Sliced(Gin[:, self.state])
@@ -286,26 +488,35 @@ class Manifold:
         diagonal[Cs.row[own]] = Cs.data[own].astype(np.int64) - 1
         off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
         sizes = np.cumsum([0] + [rows.size for rows in self.levels])
-        self._sensitivity = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
+        self._sweeps = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
+        self._window = _Window(self._sweeps, sp.hstack([J[:, self.design], J[:, self.state]]),
+                               self.pattern, self.pattern_weights)
 
     def _levels(self, off: sp.csr_matrix) -> np.ndarray:
         """The level of each marching equation (n_eq,): 0 for one that uses no other
         equation's unknown, else one more than the highest level among those it uses.
-        ``off``: the equations x state Jacobian pattern without each equation's own unknown."""
+        ``off``: the equations x state Jacobian pattern without each equation's own unknown.
+        Kahn's topological order, one frontier (a level) at a time."""
         owner = np.empty(off.shape[1], dtype=np.int64)
         owner[self.match] = np.arange(off.shape[0])
         deps = sp.csr_matrix((np.ones(off.nnz), owner[off.indices], off.indptr),
                              shape=(off.shape[0], off.shape[0]))
-        starts, has = deps.indptr[:-1], np.diff(deps.indptr) > 0
-        level = np.zeros(off.shape[0], dtype=np.int64)
-        for _ in range(off.shape[0] + 1):
-            new = np.zeros_like(level)
-            if deps.nnz:
-                new[has] = np.maximum.reduceat(level[deps.indices] + 1, starts[has])
-            if np.array_equal(new, level):
-                return level
-            level = new
-        raise RuntimeError("the marching equations are cyclic in the state")
+        deps.sum_duplicates()
+        users = deps.T.tocsr()  # row e: the equations that use e's unknown
+        waiting = np.diff(deps.indptr)  # unknowns each equation still waits for
+        level = np.full(off.shape[0], -1, dtype=np.int64)
+        frontier, k = np.flatnonzero(waiting == 0), 0
+        while frontier.size:
+            level[frontier] = k
+            starts, counts = users.indptr[frontier], np.diff(users.indptr)[frontier]
+            ends = np.cumsum(counts)
+            used = users.indices[np.repeat(starts - ends + counts, counts)
+                                 + np.arange(ends[-1] if ends.size else 0)]
+            np.subtract.at(waiting, used, 1)
+            frontier, k = np.unique(used[waiting[used] == 0]), k + 1
+        if np.any(level < 0):
+            raise RuntimeError("the marching equations are cyclic in the state")
+        return level
 
     # ---------------------------------------------------------------- evaluation
     def point(self, x: np.ndarray) -> _Point | None:
@@ -316,22 +527,20 @@ class Manifold:
         return _Point(x=x, r=r, g=g)
 
     def linearize(self, p: _Point) -> _Linearization | None:
-        """The Jacobians and the sensitivity at p; None where they are not finite or the
-        marching equations no longer determine their unknowns."""
+        """The derivatives at p; None where they are not finite or the marching equations
+        no longer determine their unknowns. Invalidates the last point's."""
         J, G = self._jacobians(p.x)
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
             return None
-        S = self.sensitivity(G)
-        if S is None:
+        if not self._sweeps.refill(G):
             return None
-        return _Linearization(J_design=self._J_design(J).toarray(), J_state=self._J_state(J),
-                              G_design=self._G_design(G), G_state=self._G_state(G), S=S)
-
-    def sensitivity(self, G: np.ndarray) -> np.ndarray | None:
-        """S = ds/dd (n_s, n_d) from C_s S = -C_d, level by level (:class:`_Levels`);
-        ``G``: the nonzeros of the constraints' Jacobian. None where an equation's own
-        unknown has a zero coefficient."""
-        return self._sensitivity(G)
+        reduced = self._window(J, p.r)
+        if reduced is None:
+            return None
+        return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
+                              G_design=self._G_design(G), G_state=self._G_state(G),
+                              levels=self._sweeps, JtJ=reduced[0], grad=reduced[1],
+                              pattern_metric=reduced[2])
 
     def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The inequality rows of the reduced problem at (g, x): g's inequality rows, then
@@ -348,12 +557,12 @@ class Manifold:
 
 @dataclass
 class _Model:
-    """The Gauss-Newton model of the reduced problem at a point: the reduced Jacobian Jr
-    (n_r, n_d), H = Jr' Jr + B and the metric M (n_d, n_d), the gradient Jr' r (n_d,),
-    and its inequalities: rows = g's inequality rows, then the bounded design, then the
-    bounded state variables, each with its bounds minus its current value."""
+    """The Gauss-Newton model of the reduced problem at a point: JtJ = Jr' Jr (Jr the
+    reduced Jacobian, n_r x n_d, never formed), H = JtJ + B, the metric M (n_d, n_d), the
+    gradient Jr' r (n_d,), and its inequalities: rows = g's inequality rows, then the
+    bounded design, then the bounded state variables, each with its bounds minus its
+    current value."""
 
-    Jr: np.ndarray
     JtJ: np.ndarray
     H: np.ndarray
     M: np.ndarray
@@ -364,15 +573,9 @@ class _Model:
 
 
 def _model(man: Manifold, p: _Point, lin: _Linearization) -> _Model:
-    S = lin.S
-    Jr = lin.J_design + lin.J_state @ S
-    M = np.diag(man.design_weights)
-    for k in range(0, man.pattern.size, ROWS):  # S_p' D_p S_p without a copy of S_p
-        Sp = S[man.pattern[k:k + ROWS]] * np.sqrt(man.pattern_weights[k:k + ROWS])[:, None]
-        M += Sp.T @ Sp
+    M = lin.pattern_metric + np.diag(man.design_weights)
     now = man.inequalities(p.g, p.x)
-    JtJ = Jr.T @ Jr
-    return _Model(Jr=Jr, JtJ=JtJ, H=JtJ, M=M, grad=Jr.T @ p.r, lin=lin,
+    return _Model(JtJ=lin.JtJ, H=lin.JtJ, M=M, grad=lin.grad, lin=lin,
                   lower=man.lower - now, upper=man.upper - now)
 
 
@@ -397,22 +600,30 @@ class _Steps:
 
     def change(self, m: _Model, dd: np.ndarray) -> np.ndarray:
         """A dd for every inequality row."""
-        ds = m.lin.S @ dd
+        ds = m.lin.state_change(dd)
         return np.concatenate([m.lin.G_design @ dd + m.lin.G_state @ ds,
                                dd[self.man.bounded_design], ds[self.man.bounded_state]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
-        """The dense rows ``which`` of A (which.size, n_d)."""
+        """The dense rows ``which`` of A (which.size, n_d): a state row's part by the
+        adjoint sweep, a block of rows at a time (:data:`BLOCK`)."""
         man, lin = self.man, m.lin
         ng, nbd = man.ineq.size, man.bounded_design.size
         A = np.zeros((which.size, man.design.size))
-        g_rows = which < ng
-        gi = which[g_rows]
-        A[g_rows] = lin.G_design[gi].toarray() + lin.G_state[gi] @ lin.S
+        g_rows = np.flatnonzero(which < ng)
+        A[g_rows] = lin.G_design[which[g_rows]].toarray()
         d_rows = (which >= ng) & (which < ng + nbd)
         A[np.flatnonzero(d_rows), man.bounded_design[which[d_rows] - ng]] = 1.0
-        s_rows = which >= ng + nbd
-        A[s_rows] = lin.S[man.bounded_state[which[s_rows] - ng - nbd]]
+        s_rows = np.flatnonzero(which >= ng + nbd)
+        state = sp.vstack([lin.G_state[which[g_rows]],
+                           sp.csr_matrix((np.ones(s_rows.size),
+                                          (np.arange(s_rows.size),
+                                           man.bounded_state[which[s_rows] - ng - nbd])),
+                                         shape=(s_rows.size, man.state.size))], format="csr")
+        into = np.concatenate([g_rows, s_rows])
+        block = max(1, BLOCK // (man.state.size + man.design.size))
+        for k in range(0, into.size, block):
+            A[into[k:k + block]] += lin.levels.adjoint(state[k:k + block].T.toarray()).T
         return A
 
     def __call__(self, m: _Model, lam: float, shift: np.ndarray) -> _Step | None:
@@ -517,7 +728,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
             break
         m = _model(man, p, lin)
         if last is not None:
-            B = _secant(B, last.step, *last.gradient_change(m, steps, p))
+            B = _secant(B, last.step, *last.gradient_change(m, steps))
         if augmented and _positive_definite(m.H + B + lam * m.M):
             m.H = m.H + B
         scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)
@@ -558,9 +769,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         actual = p.objective - trial.objective
         rho = actual / predicted
         lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
-        last = _Last(m, steps, step, trial.x[man.design] - p.x[man.design])
+        last = _Last(m, steps, step, trial.x[man.design] - p.x[man.design], trial)
         augmented = last.augmented_predicts_better(actual, B)
-        del m, lin  # the sensitivities (GBs for large patterns) before the next ones
         p, it = trial, it + 1
         if callback is not None:
             callback(p.objective, violation)
@@ -584,17 +794,18 @@ class _Last:
     choice between the Gauss-Newton and the augmented model (NL2SOL's rule: the one whose
     predicted reduction was nearer the actual one)."""
 
-    def __init__(self, m: _Model, steps: _Steps, step: _Step, change: np.ndarray):
-        self.Jr, self.grad, self.JtJ = m.Jr, m.grad, m.JtJ
+    def __init__(self, m: _Model, steps: _Steps, step: _Step, change: np.ndarray,
+                 trial: _Point):
+        self.grad, self.JtJ = m.grad, m.JtJ
         self.which, self.multipliers = step.which, step.multipliers
         self.A = steps.rows(m, step.which) if step.which.size else None
         self.step = change
+        self.Jt_r = m.lin.jacobian_transpose(trial.r)  # Jr' r at the accepted point
 
-    def gradient_change(self, m: _Model, steps: _Steps,
-                        p: _Point) -> tuple[np.ndarray, np.ndarray]:
+    def gradient_change(self, m: _Model, steps: _Steps) -> tuple[np.ndarray, np.ndarray]:
         """(y, y_sharp) of :func:`_secant` at the new model m: the change of the gradient
         of the Lagrangian (the QP's multipliers held), and of its part that Jr' Jr misses."""
-        y, y_sharp = m.grad - self.grad, m.grad - self.Jr.T @ p.r
+        y, y_sharp = m.grad - self.grad, m.grad - self.Jt_r
         if self.A is not None:
             dA = (steps.rows(m, self.which) - self.A).T @ self.multipliers
             y, y_sharp = y + dA, y_sharp + dA

@@ -68,9 +68,9 @@ def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(
     x = nlp.project(x)
     assert x is not None
     lin = man.linearize(man.point(x))
-    S = lin.S
+    S = lin.state_change(np.eye(man.design.size))  # the forward sweep, column by column
     residuals = ca.Function("r", [nlp.x], [nlp.residuals])
-    Jr = lin.J_design + lin.J_state @ S
+    Jr = lin.J_design.toarray() + lin.J_state @ S
     h = 1e-6
     for k in rng.choice(man.design.size, 12, replace=False):
         xp, xm = x.copy(), x.copy()
@@ -82,6 +82,46 @@ def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(
         fd_r = (residuals(xp) - residuals(xm)).full().ravel() / (2 * h)
         np.testing.assert_allclose(Jr[:, k], fd_r, atol=1e-6 * max(1.0, np.abs(fd_r).max()))
 
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 2 ** 16))
+def test_the_level_pass_and_the_sweeps_match_the_dense_sensitivity(manifold, seed):
+    """J' J, J' r and S_p' D_p S_p accumulated level by level in the working set
+    (reduced._Window), S' by the backward sweep, and the inequality rows, against the
+    products of the whole S (the forward sweep of the identity, checked against finite
+    differences above) to round-off; the working set is a part of the state."""
+    _, man = manifold
+    nlp, rng = man.nlp, np.random.default_rng(seed)
+    x = nlp.x0.copy()
+    x[man.design] += 1e-3 * rng.standard_normal(man.design.size)
+    p = man.point(nlp.project(x))
+    lin = man.linearize(p)
+    S = lin.state_change(np.eye(man.design.size))
+    Jr = lin.J_design.toarray() + lin.J_state @ S
+    Sp = S[man.pattern] * np.sqrt(man.pattern_weights)[:, None]
+
+    def close(mine, dense):
+        np.testing.assert_allclose(mine, dense, rtol=0, atol=1e-12 * np.abs(dense).max())
+
+    close(lin.JtJ, Jr.T @ Jr)
+    close(lin.grad, Jr.T @ p.r)
+    close(lin.pattern_metric, Sp.T @ Sp)
+    Y = rng.standard_normal((man.state.size, 3))
+    close(lin.levels.adjoint(Y), S.T @ Y)
+    w = rng.standard_normal(p.r.size)
+    close(lin.jacobian_transpose(w), Jr.T @ w)
+    m = reduced._model(man, p, lin)
+    steps = reduced._Steps(man)
+    which = rng.choice(m.lower.size, 40, replace=False)
+    ng, nbd = man.ineq.size, man.bounded_design.size
+    A = np.vstack([lin.G_design.toarray() + lin.G_state @ S,
+                   np.eye(man.design.size)[man.bounded_design], S[man.bounded_state]])
+    assert ng + nbd + man.bounded_state.size == A.shape[0]
+    close(steps.rows(m, which), A[which])
+    dd = rng.standard_normal(man.design.size)
+    close(steps.change(m, dd), A @ dd)
+    assert man._window.pool < man.state.size
 
 @pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
 def test_levenberg_marquardt_alone_reaches_ipopts_optimum(name):
