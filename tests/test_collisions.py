@@ -253,14 +253,16 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     assert np.mean(m < 0.5 * brute) > 0.1          # the panel frames do better for some
 
 
-@pytest.mark.parametrize("clearance", [0.0, 0.05])
-def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(clearance):
-    """The broad phase (one tree per coarse state, float32 tables) keeps every pair that a
-    float64 scan of all pairs finds within the margin at either end of a coarse step and
-    not cleared by its sphere gaps and motion bound, with a motion bound at least as
-    large."""
-    pat = random_recipe(29)
+@pytest.mark.parametrize("seed, clearance, split", [(29, 0.0, False), (29, 0.05, False),
+                                                   (16, 0.0, True), (16, 0.05, True)])
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, split):
+    """The broad phase (one tree per coarse state, float32 tables; with very unequal panels
+    the big ones queried apart) keeps every pair that a float64 scan of all pairs finds
+    within the margin at either end of a coarse step and not cleared by its sphere gaps
+    and motion bound, with a motion bound at least as large."""
+    pat = random_recipe(seed)
     geo = _Geometry(pat)
+    assert (geo.big.size > 0) == split
     K = 13
     states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
     margin = geo.radius.max() + clearance
@@ -283,3 +285,40 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(clearance):
             assert got[(k, k + 1, a, b)] >= bound
         expected += need.sum()
     assert expected > 0 and len(rows) >= expected
+
+
+def perturbed_miura(seed: int) -> rq.Pattern:
+    """A 6 x 6 Miura-ori (alpha0 = 1.2) with boundary angles perturbed by 0.02 pi."""
+    return nm.march(rq.perturb_angles(rq.miura_boundary(6, 6, alpha0=1.2), 0.02 * np.pi, seed))
+
+
+@pytest.mark.parametrize("make, seed, clearance, omega_max, split", [
+    (perturbed_miura, 0, 0.4, 3.0, False),      # similar panels: one tree query per state
+    (perturbed_miura, 1, 0.2, 3.0, False),
+    (random_recipe, 11, 0.03, 2.4, True),       # very unequal panels: big ones queried apart
+    (random_recipe, 16, 0.03, 2.4, True)])
+def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, omega_max, split):
+    """Ground truth for the whole broad phase (trees, sphere gaps, float32 slack, motion
+    bounds): every pair sharing no vertex that an all-pairs scan finds within the
+    clearance at some omega of a coarse step (5 samples a step, its ends included) is a
+    row of that step; and the reported first contact is no later than the scan's. The
+    steps are longer than the library's (more motion within one), so that the margin
+    matters."""
+    pat = make(seed)
+    geo = _Geometry(pat)
+    assert (geo.big.size > 0) == split
+    K = 4
+    omegas = np.linspace(0.0, omega_max, K)
+    rows, _ = _coarse_rows(geo, _States(geo, 1.0, omegas), K, geo.radius.max() + clearance,
+                           clearance)
+    got = {(a, geo.label(p, q)) for a, _, p, q in rows.tolist()}
+    found, first = 0, np.inf
+    for k in range(K - 1):
+        for w in np.linspace(omegas[k], omegas[k + 1], 5):
+            close = [pair for pair, d in all_pair_distances(pat, w).items() if d <= clearance]
+            assert all((k, pair) in got for pair in close)
+            found += len(close)
+            first = min(first, w) if close else first
+    assert found > 0
+    rep = collisions(pat, omega_max, clearance=clearance)
+    assert rep.first_omega is not None and rep.first_omega <= first
