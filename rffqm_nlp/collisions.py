@@ -353,23 +353,24 @@ def _vertex_face_distance(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- flat state
 
 def _flat_overlaps(geo: _Geometry) -> list[PanelPair]:
-    """Pairs of panels whose interiors overlap in the flat pattern (omega = 0)."""
-    X = geo.pat.X.reshape(-1, 3)[:, :2]
-    C = _centroid(X[geo.corners])
+    """Pairs of panels whose interiors overlap in the flat pattern (omega = 0): a
+    separating-axis test on the eight edge normals of the pairs whose circumscribed discs
+    overlap, row by row on a table (8, P) of the corners' x then y (a, c, d, b around)."""
+    X = geo.pat.X.reshape(-1, 3)
+    R = X[geo.corners[:, [0, 2, 3, 1]], :2].transpose(2, 1, 0).reshape(8, -1)
+    C = np.stack([R[:4].sum(axis=0), R[4:].sum(axis=0)], axis=1) / 4
     pq = cKDTree(C).query_pairs(2 * geo.radius.max(), output_type="ndarray").reshape(-1, 2)
     d = C[pq[:, 0]] - C[pq[:, 1]]                                   # circumscribed discs
     pq = pq[np.hypot(d[:, 0], d[:, 1]) <= geo.radius[pq[:, 0]] + geo.radius[pq[:, 1]]]
-    if pq.size == 0:
-        return []
-    ring = geo.corners[:, [0, 2, 3, 1]]                             # a, c, d, b around
-    P, Q = X[ring[pq[:, 0]]], X[ring[pq[:, 1]]]                     # (n, 4, 2)
-    edges = np.concatenate([np.roll(P, -1, axis=1) - P, np.roll(Q, -1, axis=1) - Q], axis=1)
-    ax, ay = -edges[..., 1:2], edges[..., 0:1]                      # (n, 8, 1)
-    pP = ax * P[:, None, :, 0] + ay * P[:, None, :, 1]              # (n, 8, 4)
-    pQ = ax * Q[:, None, :, 0] + ay * Q[:, None, :, 1]
-    eps = 1e-9 * geo.scale * np.hypot(ax, ay)[..., 0]
-    gap = np.maximum(_least(pQ) - _most(pP), _least(pP) - _most(pQ))
-    hit = ~np.any(gap > -eps, axis=1)
+    A, B = R.take(pq[:, 0], axis=1), R.take(pq[:, 1], axis=1)       # (8, n)
+    hit = np.ones(len(pq), dtype=bool)
+    for F in (A, B):
+        for k in range(4):
+            ax, ay = F[4 + k] - F[4 + (k + 1) % 4], F[(k + 1) % 4] - F[k]   # edge normal
+            pA = [ax * A[i] + ay * A[4 + i] for i in range(4)]
+            pB = [ax * B[i] + ay * B[4 + i] for i in range(4)]
+            gap = np.maximum(_least_of(pB) - _most_of(pA), _least_of(pA) - _most_of(pB))
+            hit &= gap <= -1e-9 * geo.scale * np.hypot(ax, ay)
     return sorted(geo.label(p, q) for p, q in pq[hit])
 
 

@@ -180,6 +180,55 @@ def test_flat_overlaps_of_a_fabricated_pattern():
     assert collisions(pat, 0.0).flat_overlaps == []
 
 
+def cross2(u: np.ndarray, v: np.ndarray) -> float:
+    return float(u[0] * v[1] - u[1] * v[0])
+
+
+def clipped_area(P: np.ndarray, Q: np.ndarray) -> float:
+    """Area of the intersection of two convex polygons P, Q (k, 2), counterclockwise
+    (Sutherland-Hodgman clipping of P by each edge of Q, then the shoelace formula)."""
+    out = list(P)
+    for a, b in zip(Q, np.roll(Q, -1, axis=0)):
+        pts, out = out, []
+        side = [cross2(b - a, x - a) for x in pts]
+        for k, x in enumerate(pts):
+            y, sx, sy = pts[(k + 1) % len(pts)], side[k], side[(k + 1) % len(pts)]
+            if sx >= 0:
+                out.append(x)
+            if sx * sy < 0:
+                out.append(x + (y - x) * sx / (sx - sy))
+        if len(out) < 3:
+            return 0.0
+    x, y = np.array(out).T
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+@pytest.mark.parametrize("seed", [0, 2, 3, 5])            # seeds whose panels stay convex
+def test_flat_overlaps_match_clipped_areas(seed):
+    """Fabricated flat patterns (the columns from j on slid back over the left part by a
+    fraction t of a zigzag period, the rows from i on by t/2, vertices jittered; panels
+    stay convex): the reported overlaps are the pairs whose quadrilaterals (a, c, d, b
+    around) intersect in a positive area (clipping, every pair)."""
+    rng = np.random.default_rng(seed)
+    pat = miura(4, 6, alpha0=1.1)
+    X = np.array(pat.X)
+    j, i, t = rng.integers(2, 6), rng.integers(2, 4), rng.uniform(0.55, 0.95)
+    X[:, j:] -= t * (X[:, j] - X[:, j - 2])[:, None]
+    X[i:, :] -= t / 2 * (X[i] - X[i - 2])[None]
+    X[..., :2] += rng.normal(0, 0.03, X[..., :2].shape)
+    fake = rq.Pattern(alpha=pat.alpha, beta=pat.beta, sigma=pat.sigma, lh=pat.lh,
+                      lv=pat.lv, mu=pat.mu, X=X)
+    geo = _Geometry(fake)
+    quads = []
+    for r in X.reshape(-1, 3)[geo.corners[:, [0, 2, 3, 1]], :2]:     # (4, 2) each
+        turns = [cross2(r[(k + 1) % 4] - r[k], r[(k + 2) % 4] - r[(k + 1) % 4]) for k in range(4)]
+        assert min(turns) > 0 or max(turns) < 0                      # convex
+        quads.append(r if turns[0] > 0 else r[::-1])
+    expected = sorted(geo.label(p, q) for p, q in zip(*np.triu_indices(len(quads), 1))
+                      if clipped_area(quads[p], quads[q]) > 1e-9)
+    assert expected and collisions(fake, 0.0).flat_overlaps == expected
+
+
 def test_report_to_dict_and_inputs():
     rep = collisions(miura(2, 2), 1.0)
     assert isinstance(rep, CollisionReport)
