@@ -692,30 +692,32 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 #: every solve holds (Python, CasADi, the NLP) ...
 MEMORY_BASE = 150e6
 #: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
-#: transcriptions with MUMPS' factor; "levenberg-marquardt": the marching and the sparse
-#: model, besides the dense sensitivity) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 66e3, "simultaneous": 190e3, "sequential": 250e3}
+#: transcriptions with MUMPS' factor; "levenberg-marquardt": the build of the sparse
+#: Jacobians, its peak, and the marching) ...
+MEMORY_PER_PANEL = {"levenberg-marquardt": 63e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
-#: ... and for Levenberg-Marquardt its dense sensitivity of the marched unknowns (about
-#: 13 per panel) to the design variables (about 3 per panel row and column), 8 bytes each,
-#: held about this many times at the peak.
-LM_SENSITIVITY_COPIES = 1.21
+#: ... and for Levenberg-Marquardt the working set of its sensitivity: about
+#: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later
+#: level still needs, :class:`rffqm_nlp.reduced._Window`; fitted to 20 to 100 panels a side)
+#: by the 3 (P + Q) design variables, 8 bytes each.
+WORKING_SET, WORKING_SET_POWER = 17.6, 0.705
 
 
 def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None) -> int:
     """Bytes that solving ``problem`` with ``options`` needs at its peak (a model fitted to
     measurements, see :data:`MEMORY_BASE`; a multistart solves one start at a time).
 
-    For 2N x 2M panels (P = 2N, Q = 2M): Levenberg-Marquardt needs MEMORY_BASE +
-    MEMORY_PER_PANEL * P Q + LM_SENSITIVITY_COPIES * 8 * (13 P Q) * 3 (P + Q); IPOPT
-    MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
-    the sequential transcription)."""
+    For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
+    WORKING_SET * (P Q) ** WORKING_SET_POWER * 3 (P + Q) (the build's peak and the working
+    set added, though they do not coincide: an upper estimate); IPOPT MEMORY_BASE +
+    MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for the sequential
+    transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
     if options.solver == LM:
-        dense = 8.0 * (13.0 * P * Q) * (3.0 * (P + Q))
-        need = MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + LM_SENSITIVITY_COPIES * dense
+        working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * 3.0 * (P + Q)
+        need = MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + working_set
     else:
         need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q
         if options.transcription == "sequential":

@@ -35,9 +35,7 @@ import cProfile
 import json
 import os
 import pstats
-import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -48,8 +46,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps it
     sys.path.insert(0, str(ROOT))
 
-from common import (RESULTS, TARGETS, Run, add_smoke, fmt, run_child,  # noqa: E402
-                    smoke_dir, solve_in_child, target_problem, write_table)
+from common import (RESULTS, TARGETS, Run, add_smoke, export_package, fmt,  # noqa: E402
+                    run_child, smoke_dir, solve_in_child, target_problem, write_table)
 from rffqm_nlp import numpy_model  # noqa: E402
 
 #: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
@@ -80,15 +78,6 @@ def forward_time(name: str, n: int, repeat: int) -> float:
         numpy_model.fold(numpy_model.march(start.boundary), start.omega)
         best = min(best, time.perf_counter() - t0)
     return best
-
-
-def export_baseline(rev: str) -> Path:
-    """The package at git revision ``rev``, exported to a temporary folder."""
-    folder = Path(tempfile.mkdtemp(prefix="rffqm-baseline-"))
-    archive = subprocess.run(["git", "archive", rev, "rffqm_nlp"], cwd=ROOT, check=True,
-                             capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
-    return folder
 
 
 def solve_row(name: str, n: int, path: str, threads: int, package: Path) -> dict:
@@ -165,10 +154,10 @@ def main() -> None:
     forward = {name: forward_time(name, args.n, args.repeat) for name in TARGETS}
     packages = {"default": ROOT}
     if args.previous:  # right after the default: the two rows see the same load
-        packages["previous"] = export_baseline(args.previous)
+        packages["previous"] = export_package(args.previous)
     packages["ipopt"] = ROOT
     if args.baseline:
-        packages["baseline"] = export_baseline(args.baseline)
+        packages["baseline"] = export_package(args.baseline)
     rows = []
     for t in threads:
         for name in TARGETS:

@@ -1,5 +1,5 @@
 """What the studies share: the bundled target problems, one design solved in a child process
-(its time and peak memory its own), the machine/date line of the tables, the table cell
+(its time and peak memory its own), an earlier revision's package, the machine/date line of the tables, the table cell
 formatter, writing and printing a table, and the ``--smoke`` run (tiny sizes, output to a temporary folder).
 
 A study imports it as ``from common import ...`` (the studies folder is the script's path).
@@ -104,6 +104,16 @@ def solve_design(target: str, n: int, design: dict | None = None,
     row.setdefault("history", {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
     row["x"] = None if x is None else np.asarray(x, dtype=float).tolist()
     return row
+
+
+def export_package(rev: str) -> Path:
+    """The package at git revision ``rev``, exported to a temporary folder (put it on
+    PYTHONPATH to run that revision's code, e.g. in :func:`solve_in_child`'s ``env``)."""
+    folder = Path(tempfile.mkdtemp(prefix="rffqm-baseline-"))
+    archive = subprocess.run(["git", "archive", rev, "rffqm_nlp"], cwd=ROOT, check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
 
 
 def solve_in_child(target: str, n: int, design: dict | None = None, solve: dict | None = None,
