@@ -610,7 +610,8 @@ def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
     end (:func:`_near`, one tree per state) and that the sphere gaps do not certify clear;
     and SAFETY times the rows' motion bound (n,) used here, the centres' relative
     displacement plus each panel's largest vertex displacement about its centre (at least
-    :func:`_motion`'s)."""
+    :func:`_motion`'s). The tree of state k gives the pairs of the step after it, and
+    those of the step before it that were not near at its start."""
     P = geo.N * geo.M
     C = st.T[:K, 12:15]                                              # (K, 3, P)
     dC = C[1:] - C[:-1]
@@ -619,32 +620,29 @@ def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
     spin = _most_of(list(np.sqrt(dQ[:, 0] ** 2 + dQ[:, 1] ** 2 + dQ[:, 2] ** 2).transpose(1, 0, 2)))
     f32 = np.float32                             # the broad phase only, with a slack eps:
     eps = _slack(geo, C)                         # gaps - eps, bounds + eps are safe
+    reach = margin + eps
     Cx = np.concatenate([C[:1], C, C[-1:]]).astype(f32)              # C[k -+ 1], ends padded
     sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))]).astype(f32)
-    near = []                    # per state k: p, q, gaps at k - 1, k, k + 1, bounds m
-    for k in range(K):           # of the steps before and after k
-        T = _table(geo, C[k].T, f32)
-        p, q, g = _near(geo, T, margin + eps)
-        X = np.concatenate([T[:4], Cx[k], Cx[k + 2], sx[k:k + 2]])       # (12, P)
-        A, B = X.take(p, axis=1, mode="clip"), X.take(q, axis=1, mode="clip")
-        m = [SAFETY * (_shift(A, B, a, b) + A[s] + B[s]) for a, b, s in ((4, 0, 10),
-                                                                        (0, 7, 11))]
-        near.append((p, q, [_gap(A, B, 4), g, _gap(A, B, 7)], m))
     rows, bounds = [], []
-    for k in range(K - 1):
-        pa, qa, ga, ma = near[k]
-        pb, qb, gb, mb = near[k + 1]
-        new = gb[0] > margin + eps               # near at k + 1 only (else in near[k])
-        p, q = np.concatenate([pa, pb[new]]), np.concatenate([qa, qb[new]])
-        g0 = np.concatenate([ga[1], gb[0][new]])
-        g1 = np.concatenate([ga[2], gb[1][new]])
-        m = np.concatenate([ma[1], mb[0][new]])
-        keep = (g0 + g1 - m) / 2 <= clearance + 2 * eps
-        p, q = p[keep], q[keep]
-        rows.append(np.stack([np.full_like(p, k), np.full_like(p, k + 1), p, q], axis=1))
-        bounds.append(m[keep].astype(float) + eps)
-    if not rows:
-        return np.zeros((0, 4), dtype=np.int64), np.zeros(0)
+
+    def keep(k, p, q, g0, g1, m):                # step k's pairs the sphere gaps do not clear
+        k_ = np.flatnonzero((g0 + g1 - m) / 2 <= clearance + 2 * eps)
+        rows.append(np.stack([np.full(len(k_), k), np.full(len(k_), k + 1), p[k_], q[k_]], axis=1))
+        bounds.append(m[k_].astype(float) + eps)
+
+    for k in range(K):
+        T = _table(geo, C[k].T, f32)
+        p, q, g = _near(geo, T, reach)
+        X = np.concatenate([T[:4], Cx[k], Cx[k + 2], sx[k:k + 2]])   # (12, P)
+        A, B = X.take(p, axis=1, mode="clip"), X.take(q, axis=1, mode="clip")
+        if k + 1 < K:                            # the step after k: every pair near at k
+            keep(k, p, q, g, _gap(A, B, 7), SAFETY * (_shift(A, B, 0, 7) + A[11] + B[11]))
+        if k > 0:                                # the step before k: those near at k only
+            g0 = _gap(A, B, 4)
+            new = np.flatnonzero(g0 > reach)
+            A, B = A[:, new], B[:, new]
+            keep(k - 1, p[new], q[new], g0[new], g[new],
+                 SAFETY * (_shift(A, B, 4, 0) + A[10] + B[10]))
     return np.concatenate(rows), np.concatenate(bounds)
 
 
