@@ -447,10 +447,10 @@ class _States:
             grown = np.empty((max(2 * len(self._T), K + k), *self._T.shape[1:]))
             grown[:K] = self._T[:K]
             self._T = grown
-        Y = self.geo.states(self.sign * omegas).transpose(0, 2, 1)      # (k, 3, V)
-        T = self._T[K:K + k]
-        X = Y[:, :, self.geo.corners.T]                                  # (k, 3, 4, P)
-        T[:, :12] = X.reshape(k, 12, -1)
+        Y = np.ascontiguousarray(self.geo.states(self.sign * omegas).transpose(0, 2, 1))
+        T = self._T[K:K + k]                                             # Y: (k, 3, V)
+        T[:, :12] = Y.take(self.geo.corners.T, axis=2).reshape(k, 12, -1)
+        X = T[:, :12].reshape(k, 3, 4, -1)                               # (k, 3, 4, P)
         T[:, 12:15] = (X[:, :, 0] + X[:, :, 1] + X[:, :, 2] + X[:, :, 3]) / 4
         u, v = X[:, :, 3] - X[:, :, 0], X[:, :, 2] - X[:, :, 1]          # (k, 3, P)
         n = np.stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1], u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
