@@ -42,6 +42,8 @@ LM = "levenberg-marquardt"
 SOLVERS = ("ipopt", LM)
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 GROUPS = ("angles", "lengths", "omega")
+#: What the target lattice is (DesignProblem.correspondence, docs/meshes.md).
+CORRESPONDENCES = ("lattice", "free")
 #: The tables of a design file.
 TABLES = ("target", "design", "solve")
 #: IPOPT options that a SolveOptions field (or solve's ``verbose``) sets, and that field.
@@ -79,6 +81,7 @@ DESIGN_KEYS = {
                         hint="([low, high])"),
     "fix": Key("list", item=Key("choice", choices=GROUPS)),
     "weights": Key("table", spec={name: Key("number", low=0.0) for name in DEFAULT_WEIGHTS}),
+    "correspondence": Key("choice", choices=CORRESPONDENCES),
 }
 #: What each key of a [solve] table (and each SolveOptions field) allows.
 SOLVE_KEYS = {
@@ -254,7 +257,12 @@ class DesignProblem:
       :func:`rffqm_nlp.transcription.loss_residuals`; "regularization" (Tikhonov, towards
       the Miura start) and "smoothness" (second differences of the boundary perturbation
       along each edge, :func:`rffqm_nlp.transcription.smoothness_residuals`; default 0);
-      missing keys count as 0.
+      missing keys count as 0;
+    * ``correspondence``: "lattice" (the default: the target lattice is r on the uniform
+      grid of the domain) or "free" (the (u, v) of every lattice point is a design
+      variable in the domain, the grid kept from folding over,
+      :class:`rffqm_nlp.transcription.Correspondence`: a closer fit to the shape at a
+      higher cost per iteration, measured in docs/meshes.md).
 
     How it is solved is a :class:`SolveOptions`, given to :meth:`solve`.
     """
@@ -271,6 +279,7 @@ class DesignProblem:
     omega_bounds: tuple[float, float] = (0.05, PI - 0.05)
     fix: tuple[str, ...] = ()
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
+    correspondence: str = "lattice"
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
@@ -346,8 +355,28 @@ class DesignProblem:
             weights=weights or self.weights, min_angle=self.min_angle,
             min_length=self.min_length, mu_margin=self.mu_margin,
             omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
-            reference_omega=start.omega)
+            reference_omega=start.omega, correspondence=self._correspondence())
         return getattr(transcription, (options or SolveOptions()).transcription)(setup)
+
+    def _correspondence(self) -> transcription.Correspondence | None:
+        """The free correspondence from the uniform grid (None with "lattice")."""
+        if self.correspondence != "free":
+            return None
+        u, v = self.target.lattice_uv(self.N, self.M)
+        U, V = np.meshgrid(u, v, indexing="ij")
+        return transcription.Correspondence(self.target.casadi_function(), self.target.domain,
+                                            U, V)
+
+    def grid(self, result: DesignResult) -> tuple[np.ndarray, np.ndarray] | None:
+        """The grid (U, V), each (N+1, M+1), of a free correspondence at ``result`` (a
+        result of this problem, read from its design vector); None with "lattice"."""
+        if self.correspondence != "free":
+            return None
+        nlp = self.transcribe(options=SolveOptions.from_config(result.problem["solve"]))
+        uv = np.asarray(result.x)[nlp.grid_index]
+        n = uv.size // 2
+        return tuple(uv[k * n:(k + 1) * n].reshape(self.N + 1, self.M + 1, order="F")
+                     for k in (0, 1))
 
     # ------------------------------------------------------------------ solve
     def solve(self, options: SolveOptions | None = None, *,
@@ -569,7 +598,7 @@ class DesignProblem:
 
         def reached(x: np.ndarray) -> bool:
             coarse = shape.coarse_grain(nlp.folded_array(x))
-            return shape.kabsch(coarse, start.target_points)[2] <= limit
+            return shape.kabsch(coarse, nlp.target_array(x, start.target_points))[2] <= limit
 
         return reached
 
@@ -593,9 +622,10 @@ class DesignProblem:
                                f"{np.abs(Y - Y_graph).max():.3g}", status="remarch_mismatch",
                                stats=stats, last_iterate=x)
         self._check_constraints(pattern, stats, x)
-        R, t, _ = shape.kabsch(shape.coarse_grain(Y), start.target_points)
+        target_points = nlp.target_array(x, start.target_points)
+        R, t, _ = shape.kabsch(shape.coarse_grain(Y), target_points)
         folded = Y @ R.T + t
-        fit = Fit(**design_fit(folded, start.target_points, self.target),
+        fit = Fit(**design_fit(folded, target_points, self.target),
                   min_side_over_mean=float(pattern.side_lengths.min()
                                            / pattern.side_lengths.mean()),
                   min_sector_angle=float(pattern.sector_angles.min()))
@@ -607,10 +637,10 @@ class DesignProblem:
         grid = (None if surfaces.rebuildable(problem["target"])
                 else self.target.sample(TARGET_GRID, TARGET_GRID))
         return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
-                            target_points=start.target_points, rotation=R, translation=t,
+                            target_points=target_points, rotation=R, translation=t,
                             fit=fit, stats=stats, problem=problem, x=x,
                             curvature=curvature_maps(shape.coarse_grain(folded),
-                                                     start.target_points, self.target),
+                                                     target_points, self.target),
                             target_grid=grid)
 
     def _check_constraints(self, pattern, stats: SolveStats, x: np.ndarray) -> None:

@@ -62,6 +62,11 @@ class NLP:
     #: marches, and of every sector angle and side: see :mod:`rffqm_nlp.reduced`
     design_index: np.ndarray | None = None
     pattern_index: np.ndarray | None = None
+    #: Function of x: the target lattice (Tx, Ty, Tz), each (N+1, M+1), of a free
+    #: correspondence (:class:`Correspondence`); None: the target lattice is fixed
+    free_target: ca.Function | None = None
+    #: indices in x of that correspondence's grid, U then V (each column-major)
+    grid_index: np.ndarray | None = None
 
     @property
     def objective(self) -> ca.MX:
@@ -71,6 +76,13 @@ class NLP:
     def folded_array(self, x: np.ndarray) -> np.ndarray:
         """The folded vertices at the design vector ``x``, (2N+1, 2M+1, 3)."""
         return np.stack([c.full() for c in self.folded(x)], axis=-1)
+
+    def target_array(self, x: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+        """The target lattice at ``x`` (N+1, M+1, 3): ``fixed`` (the sampled lattice, same
+        shape) unless the correspondence is free."""
+        if self.free_target is None:
+            return fixed
+        return np.stack([c.full() for c in self.free_target(x)], axis=-1)
 
     def with_rows(self, rows: ca.MX, lower: np.ndarray, upper: np.ndarray) -> "NLP":
         """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
@@ -160,10 +172,13 @@ def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
-def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar, target: np.ndarray,
-                   weights: dict[str, float], spacing: float) -> ca.MX:
+def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar,
+                   target: np.ndarray | Sequence[ca.MX], weights: dict[str, float],
+                   spacing: float) -> ca.MX:
     """Residuals of the loss for the coarse lattice r(i, j) = y^{(2i)(2j)} of the folded
-    vertices, r = (rx, ry, rz) ((N+1) x (M+1) each).
+    vertices, r = (rx, ry, rz) ((N+1) x (M+1) each), against the target lattice: fixed
+    (an array (N+1, M+1, 3)) or, with a free correspondence, symbolic (Tx, Ty, Tz)
+    ((N+1) x (M+1) each, :meth:`Correspondence.lattice`).
 
     * ``forms``: the paper's loss (eq:optInverse): discrete first and second fundamental forms
       of r minus the target's, at interior points, by
@@ -176,18 +191,112 @@ def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar, tar
     the share of a mean square in the objective.
     """
     out = []
+    fixed = isinstance(target, np.ndarray)
     if weights.get("forms", 0) > 0:
         mine = shape.fundamental_forms(r)
         theirs = shape.fundamental_forms(target)
-        res = ca.vertcat(*(ca.vec(a - ca.DM(b)) for a, b in zip(mine, theirs))) / spacing ** 2
+        res = ca.vertcat(*(ca.vec(a - (ca.DM(b) if fixed else b))
+                           for a, b in zip(mine, theirs))) / spacing ** 2
         out.append(np.sqrt(weights["forms"] / res.numel()) * res)
     if weights.get("position", 0) > 0:
         pts = ca.vertcat(*(ca.vec(c).T for c in r))  # 3 x n
         moved = ca.mtimes(rotation, pts) + ca.repmat(translation, 1, pts.shape[1])
-        tgt = target.transpose(1, 0, 2).reshape(-1, 3).T  # column-major, as ca.vec
+        tgt = (target.transpose(1, 0, 2).reshape(-1, 3).T if fixed  # column-major, as ca.vec
+               else ca.vertcat(*(ca.vec(c).T for c in target)))
         res = ca.vec(moved - tgt) / spacing
         out.append(np.sqrt(weights["position"] / pts.shape[1]) * res)
     return ca.vertcat(*out)
+
+
+#: A free correspondence's grid keeps every forward difference (of u along i, of v along
+#: j) at least this fraction of the uniform grid's step, and every corner of every cell
+#: an orientation (the determinant of its two edges) at least its square, relative to the
+#: uniform cell: the grid neither folds over nor collapses (docs/meshes.md).
+MIN_GRID_STEP = 0.5
+#: The weight of a free correspondence's Tikhonov term towards the uniform grid, as a
+#: fraction of the "regularization" weight (docs/meshes.md).
+GRID_REGULARIZATION = 0.1
+
+
+@dataclass(frozen=True)
+class Correspondence:
+    """A free correspondence (docs/meshes.md): the parameters (u_ij, v_ij) of every coarse
+    lattice point are design variables and the target lattice is r(u_ij, v_ij).
+
+    ``surface``: the target's CasADi Function (u, v) -> r (3 x 1); ``domain``: ((u0, u1),
+    (v0, v1)); ``U0``, ``V0`` (N+1, M+1): the starting grid, uniform over the domain, also
+    the reference of the Tikhonov term. The grid's first and last rows hold u = u0 and u1,
+    its first and last columns v = v0 and v1: its edges slide along the domain's edges and
+    its corners stay, so a design spans the whole domain. Vectors of the grid hold U then
+    V, each column-major (as ``ca.vec``).
+    """
+
+    surface: ca.Function
+    domain: tuple[tuple[float, float], tuple[float, float]]
+    U0: np.ndarray
+    V0: np.ndarray
+
+    @property
+    def steps(self) -> tuple[float, float]:
+        """The uniform grid's steps (du, dv)."""
+        (u0, u1), (v0, v1) = self.domain
+        return (u1 - u0) / (self.U0.shape[0] - 1), (v1 - v0) / (self.U0.shape[1] - 1)
+
+    def start(self) -> np.ndarray:
+        """The starting grid as a vector (2 (N+1) (M+1),)."""
+        return np.concatenate([self.U0.ravel("F"), self.V0.ravel("F")])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lbx, ubx) of the grid vector: the domain, the edges pinned."""
+        (u0, u1), (v0, v1) = self.domain
+        shape = self.U0.shape
+        lu, hu, lv, hv = (np.full(shape, b) for b in (u0, u1, v0, v1))
+        hu[0, :], lu[-1, :] = u0, u1
+        hv[:, 0], lv[:, -1] = v0, v1
+        return (np.concatenate([lu.ravel("F"), lv.ravel("F")]),
+                np.concatenate([hu.ravel("F"), hv.ravel("F")]))
+
+    def lattice(self, U: ca.MX, V: ca.MX) -> list[ca.MX]:
+        """The target lattice (Tx, Ty, Tz) at the grid U, V, each (N+1) x (M+1)."""
+        n1, m1 = self.U0.shape
+        pts = self.surface.map(n1 * m1)(ca.vec(U).T, ca.vec(V).T)  # 3 x n
+        return [ca.reshape(pts[k, :].T, n1, m1) for k in range(3)]
+
+    def rows(self, U: ca.MX, V: ca.MX) -> tuple[ca.MX, np.ndarray, np.ndarray]:
+        """(g, lbg, ubg): the forward differences of u along i and of v along j over the
+        uniform steps, and the orientation of every cell at its four corners over the
+        uniform cell's, at least :data:`MIN_GRID_STEP` and its square."""
+        du, dv = self.steps
+        steps = ca.vertcat(ca.vec(U[1:, :] - U[:-1, :]) / du, ca.vec(V[:, 1:] - V[:, :-1]) / dv)
+        corner = {(a, b): (U[a:U.shape[0] - 1 + a, b:U.shape[1] - 1 + b],
+                           V[a:V.shape[0] - 1 + a, b:V.shape[1] - 1 + b])
+                  for a in (0, 1) for b in (0, 1)}
+
+        def turn(p, q, o):  # orientation of the edges o -> p, o -> q
+            return ((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])) / (du * dv)
+
+        c = corner
+        turns = ca.vertcat(*(ca.vec(turn(c[p], c[q], c[o])) for p, q, o in (
+            ((1, 0), (0, 1), (0, 0)), ((1, 1), (0, 0), (1, 0)),
+            ((0, 1), (1, 0), (1, 1)), ((0, 0), (1, 1), (0, 1)))))
+        lower = np.concatenate([np.full(steps.numel(), MIN_GRID_STEP),
+                                np.full(turns.numel(), MIN_GRID_STEP ** 2)])
+        return ca.vertcat(steps, turns), lower, np.full(lower.size, np.inf)
+
+    def residuals(self, U: ca.MX, V: ca.MX, weight: float) -> ca.MX:
+        """The Tikhonov term towards the starting grid, in uniform steps, times
+        sqrt(weight / its count)."""
+        du, dv = self.steps
+        delta = ca.vertcat(ca.vec(U - ca.DM(self.U0)) / du, ca.vec(V - ca.DM(self.V0)) / dv)
+        return np.sqrt(weight / delta.numel()) * delta
+
+    def damping_weights(self) -> np.ndarray:
+        """D of :func:`gauss_newton_hessian` for the grid vector: 1 / (step^2 n), n the
+        number of lattice points (a change of one uniform step weighs like one lattice
+        spacing of a length)."""
+        du, dv = self.steps
+        n = self.U0.size
+        return np.concatenate([np.full(n, 1 / (du ** 2 * n)), np.full(n, 1 / (dv ** 2 * n))])
 
 
 @dataclass(frozen=True)
@@ -208,6 +317,7 @@ class Setup:
     fixed: tuple[str, ...]
     reference: BoundaryData  # the Miura start: Tikhonov reference and MV pattern
     reference_omega: float
+    correspondence: Correspondence | None = None  # None: the target lattice is fixed
 
     @property
     def reference_vector(self) -> np.ndarray:
@@ -247,19 +357,24 @@ class Setup:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
 
-def _objective_residuals(setup: Setup, r, rigid, boundary_vec) -> ca.MX:
+def _objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.MX:
     """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the
     Tikhonov term towards the Miura start and the smoothness of the boundary perturbation
-    (lengths in units of the lattice spacing)."""
+    (lengths in units of the lattice spacing). ``grid``: (U, V) of a free correspondence
+    (the target lattice at them, and their Tikhonov term), or None."""
     q, t = rigid[:4], rigid[4:]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
     scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
     delta = (boundary_vec - ref) * scale
-    out = [loss_residuals(r, rotation_from_quaternion(q), t, setup.target, setup.weights,
+    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+    out = [loss_residuals(r, rotation_from_quaternion(q), t, target, setup.weights,
                           setup.spacing),
            ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
            np.sqrt(setup.weights.get("regularization", 0) / scale.size) * delta]
+    if grid is not None:
+        out.append(setup.correspondence.residuals(
+            *grid, GRID_REGULARIZATION * setup.weights.get("regularization", 0)))
     if setup.weights.get("smoothness", 0) > 0:
         kinks = smoothness_residuals(delta, setup.reference.N, setup.reference.M)
         out.append(np.sqrt(setup.weights["smoothness"] / kinks.numel()) * kinks)
@@ -288,29 +403,36 @@ def smoothness_residuals(delta: Scalar, N: int, M: int) -> Scalar:
 
 
 def sequential(setup: Setup) -> NLP:
-    """The sequential transcription: x = (boundary angles, boundary lengths, omega, q, t).
+    """The sequential transcription: x = (boundary angles, boundary lengths, omega, q, t),
+    then the grid (U, V) of a free correspondence.
 
     The pattern and the folded state are functions of x through the marching graph; the
     inline constraints are every vertex angle in [min_angle, pi - min_angle], the multiplier
     margin of every panel, the MV assignment of every boundary vertex
-    (:meth:`Setup.boundary_mv`) and every side >= min_length * mean side.
+    (:meth:`Setup.boundary_mv`), every side >= min_length * mean side, and a free
+    correspondence's grid rows (:meth:`Correspondence.rows`).
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
     nv, nl = N + 1 + M, N + M
-    x = ca.MX.sym("x", 2 * nv + nl + 1 + 7)
+    corr = setup.correspondence
+    n_grid = 0 if corr is None else 2 * corr.U0.size
+    n_fixed = 2 * nv + nl + 1 + 7
+    x = ca.MX.sym("x", n_fixed + n_grid)
     groups = {"angles": slice(0, 2 * nv), "lengths": slice(2 * nv, 2 * nv + nl),
               "omega": slice(2 * nv + nl, 2 * nv + nl + 1),
               "rigid": slice(2 * nv + nl + 1, 2 * nv + nl + 8)}
+    grid = None if corr is None else _grid_views(corr, x[n_fixed:])
     sig = ca.DM(bd0.sigma).T
     tri = ca.vertcat(x[:nv].T, x[nv:2 * nv].T, sig)
     lengths = x[groups["lengths"]].T
     omega = x[groups["omega"]]
     inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
     Y = folded_function(N, M).call([*inputs, omega])
-    x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()])
+    x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()]
+                        + ([] if corr is None else [corr.start()]))
     res = _objective_residuals(setup, shape.coarse_grain(Y), x[groups["rigid"]],
-                               x[:2 * nv + nl + 1])
+                               x[:2 * nv + nl + 1], grid)
     # Inline constraints on the marched pattern.
     alpha, beta, _, lh, lv, mu = pattern_function(N, M).call(inputs)[:6]
     sides = ca.vertcat(ca.vec(lh), ca.vec(lv))
@@ -328,15 +450,37 @@ def sequential(setup: Setup) -> NLP:
                           [setup.omega_bounds[0]], np.full(7, -np.inf)])
     ubx = np.concatenate([np.full(2 * nv, PI - setup.min_angle), np.full(nl, np.inf),
                           [setup.omega_bounds[1]], np.full(7, np.inf)])
+    lengths = np.zeros(n_fixed, dtype=bool)
+    lengths[groups["lengths"]] = lengths[n_fixed - 3:] = True  # boundary sides, translation
+    weights = damping_weights(setup, lengths)
+    free_target = None
+    if corr is not None:
+        g, lbg, ubg = _with_grid_rows(corr, grid, g, lbg, ubg)
+        lo, hi = corr.bounds()
+        lbx, ubx = np.concatenate([lbx, lo]), np.concatenate([ubx, hi])
+        weights = np.concatenate([weights, corr.damping_weights()])
+        free_target = ca.Function("target", [x], corr.lattice(*grid))
     for name in setup.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [x[:2 * nv + nl], omega])
     folded = ca.Function("folded", [x], list(Y))
-    lengths = np.zeros(x0.size, dtype=bool)
-    lengths[groups["lengths"]] = lengths[-3:] = True  # boundary sides, translation
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
-               unpack=unpack, folded=folded, groups=groups,
-               damping_weights=damping_weights(setup, lengths))
+               unpack=unpack, folded=folded, groups=groups, damping_weights=weights,
+               free_target=free_target,
+               grid_index=None if corr is None else np.arange(n_fixed, n_fixed + n_grid))
+
+
+def _grid_views(corr: Correspondence, part: ca.MX) -> tuple[ca.MX, ca.MX]:
+    """(U, V), each (N+1) x (M+1), of a free correspondence's grid vector ``part``."""
+    n1, m1 = corr.U0.shape
+    return ca.reshape(part[:n1 * m1], n1, m1), ca.reshape(part[n1 * m1:], n1, m1)
+
+
+def _with_grid_rows(corr: Correspondence, grid: tuple[ca.MX, ca.MX], g: ca.MX,
+                    lbg: np.ndarray, ubg: np.ndarray) -> tuple[ca.MX, np.ndarray, np.ndarray]:
+    """(g, lbg, ubg) with the grid rows of :meth:`Correspondence.rows` appended."""
+    rows, lo, hi = corr.rows(*grid)
+    return ca.vertcat(g, rows), np.concatenate([lbg, lo]), np.concatenate([ubg, hi])
 
 
 class _Layout:
@@ -493,10 +637,12 @@ def simultaneous(setup: Setup) -> NLP:
     N, M = bd0.N, bd0.M
     n1, m1 = N + 1, M + 1
     tree = _MeanTree(n1 * M + N * m1)
+    corr = setup.correspondence
+    grid_blocks = {} if corr is None else {"U": corr.U0.shape, "V": corr.U0.shape}
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
                    "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
                    "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "PHI": (N - 1, M),
-                   "P": (tree.size, 1), "omega": (1, 1), "rigid": (7, 1)})
+                   "P": (tree.size, 1), **grid_blocks, "omega": (1, 1), "rigid": (7, 1)})
     parts = (ca.MX.sym("x", lay.size - 8), ca.MX.sym("x_global", 8))  # omega, rigid
     x = ca.vertcat(*parts)
     v = lay.views(x)
@@ -531,7 +677,8 @@ def simultaneous(setup: Setup) -> NLP:
                        *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
     # Boundary design vector in BoundaryData.to_vector order.
     bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
-    res = _objective_residuals(setup, shape.coarse_grain(Y), v["rigid"], bvec)
+    grid = None if corr is None else (v["U"], v["V"])
+    res = _objective_residuals(setup, shape.coarse_grain(Y), v["rigid"], bvec, grid)
     sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
     mean_res, mean = tree.residuals(sides, v["P"])
     sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
@@ -544,9 +691,24 @@ def simultaneous(setup: Setup) -> NLP:
     lo_mu, hi_mu = setup.mu_bounds()
     lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
     ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
-    point = _marched_point(lay, start.sigma, tree)
-    x0 = point(start, setup.omega, setup.rigid0())
+    if corr is not None:
+        g, lbg, ubg = _with_grid_rows(corr, grid, g, lbg, ubg)
+    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
+                                           for n in names])
+    grid_index = block("U", "V") if corr is not None else np.zeros(0, dtype=np.int64)
+    marched_point = _marched_point(lay, start.sigma, tree)
+
+    def point(pattern, omega: float, rigid: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """x of the marched pattern, with the grid ``uv`` of a free correspondence."""
+        out = marched_point(pattern, omega, rigid)
+        out[grid_index] = uv
+        return out
+
+    x0 = point(start, setup.omega, setup.rigid0(),
+               np.zeros(0) if corr is None else corr.start())
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
+    if corr is not None:
+        lbx[grid_index], ubx[grid_index] = corr.bounds()
     for name in ("A", "B"):
         lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
     for name in ("LH", "LV"):
@@ -576,19 +738,23 @@ def simultaneous(setup: Setup) -> NLP:
             return None
         if not np.array_equal(pattern.sigma, start.sigma):  # the NLP holds every sigma_d
             return None
-        return point(pattern, float(om[0]), xk[lay.slices["rigid"]])
+        return point(pattern, float(om[0]), xk[lay.slices["rigid"]], xk[grid_index])
 
     lengths = np.zeros(lay.size, dtype=bool)
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
         lengths[lay.slices[name]] = True
     lengths[lay.size - 3:] = True  # the translation of the alignment, last in x
-    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
-                                           for n in names])
-    design = np.concatenate([*groups.values(), block("rigid")])
+    weights = damping_weights(setup, lengths)
+    free_target = None
+    if corr is not None:
+        weights[grid_index] = corr.damping_weights()
+        free_target = ca.Function("target", [x], corr.lattice(*grid))
+    design = np.concatenate([*groups.values(), block("rigid"), grid_index])
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
-               damping_weights=damping_weights(setup, lengths), design_index=design,
-               pattern_index=block("A", "B", "LH", "LV"))
+               damping_weights=weights, design_index=design,
+               pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
+               grid_index=None if corr is None else grid_index)
 
 
 def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):

@@ -1,0 +1,189 @@
+"""Which correspondence fits the shape better at equal panels: the fixed target lattice
+(``correspondence = "lattice"``: r on the uniform grid of the domain) or the free one
+(``"free"``: the (u, v) of every lattice point a design variable, docs/meshes.md)?
+
+Each bundled target (targets/<name>.toml) and two mesh targets (the hyperboloid's and the
+quarter vase's surface over its domain written as a 61 x 61 ``grid.obj``, as in
+studies/bench_mesh_targets.py, the target replaced by ``rq.surfaces.Mesh(file)``) is designed
+at 20 x 20 panels with the target file's [design] and [solve] tables in both modes, solved to
+convergence (no ``stop_rms``). Reported: the Fit's shape distances over the diameter
+(``rms_surface``, ``hausdorff``: the folded coarse lattice to the shape;
+``rms_surface_vertices``: every folded vertex), ``coverage``, the iterations, the solve's
+wall time, the status, and for the free mode the grid's smallest forward difference over
+the uniform step (the bound is ``transcription.MIN_GRID_STEP``).
+
+A second table solves the bundled targets in the free mode with the Tikhonov weight of the
+grid (``transcription.GRID_REGULARIZATION``, a fraction of the "regularization" weight) at
+three values, the middle one the package's. A third measures the cost per iteration against
+size: the sphere cap at 20, 40 and 60 panels a side, four iterations of the default solver
+in each mode (build and solve time).
+
+    .venv/bin/python studies/correspondence_choice.py [--panels 20] [--out studies/results]
+    .venv/bin/python studies/correspondence_choice.py --smoke   (sphere_cap, 8 x 8 panels,
+        no mesh target, temporary output)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+import rffqm_nlp as rq
+from bench_mesh_targets import grid_obj
+from common import RESULTS, TARGETS, Run, add_smoke, fmt, smoke_dir, target_problem, write_table
+from rffqm_nlp import transcription
+
+MODES = ("lattice", "free")
+#: the mesh targets: bundled targets whose surface is written as grid.obj
+MESH_TARGETS = ("hyperboloid", "quarter_vase")
+#: the grid's Tikhonov weights of the second table, as multiples of the package's
+GRID_WEIGHTS = (0.1, 1.0, 10.0)
+#: panels a side and iterations of the third table
+SIZES, ITERATIONS = (20, 40, 60), 4
+
+
+def grid_steps(problem: rq.DesignProblem, result: rq.DesignResult) -> float | None:
+    """The free grid's smallest forward difference (u along i, v along j) over the uniform
+    step, from the result's design vector (None for the lattice mode)."""
+    grid = problem.grid(result)
+    if grid is None:
+        return None
+    (u0, u1), (v0, v1) = problem.target.domain
+    U, V = grid
+    return float(min((np.diff(U, axis=0) * problem.N / (u1 - u0)).min(),
+                     (np.diff(V, axis=1) * problem.M / (v1 - v0)).min()))
+
+
+def solve(label: str, problem: rq.DesignProblem, options: rq.SolveOptions) -> dict:
+    """One design's row."""
+    t0 = time.perf_counter()
+    try:
+        result = problem.solve(options)
+    except rq.SolverFailed as exc:
+        return {"target": label, "mode": problem.correspondence, "status": exc.status,
+                "time": time.perf_counter() - t0}
+    fit = result.fit
+    return {"target": label, "mode": problem.correspondence, "status": result.stats.status,
+            "time": time.perf_counter() - t0, "iterations": result.stats.iterations,
+            "rms_surface": fit.rms_surface, "hausdorff": fit.hausdorff,
+            "rms_surface_vertices": fit.rms_surface_vertices, "coverage": fit.coverage,
+            "min_step": grid_steps(problem, result)}
+
+
+def iteration_cost(n: int, mode: str) -> dict:
+    """ITERATIONS iterations of the sphere cap at n x n panels: build and solve seconds."""
+    problem, options = target_problem("sphere_cap", n, correspondence=mode)
+    try:
+        stats = problem.solve(options, max_iter=ITERATIONS).stats
+    except rq.SolverFailed as exc:  # Maximum_Iterations_Exceeded, as asked
+        stats = exc.stats
+    return {"n": n, "mode": mode, "iterations": stats.iterations, "build": stats.build_time,
+            "solve": stats.solve_time}
+
+
+def cost_table(rows: list[dict]) -> str:
+    lines = ["", f"## Cost per iteration against size (sphere_cap, {ITERATIONS} iterations)",
+             "", "| panels | mode | iterations | build (s) | solve (s) | solve per iteration (s) |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['n']} | {r['mode']} | {r['iterations']} | {r['build']:.1f} | "
+                     f"{r['solve']:.1f} | {r['solve'] / max(r['iterations'], 1):.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def designs(names: tuple[str, ...], meshes: tuple[str, ...], n: int, folder: Path):
+    """(label, problem, options) of every target, the mesh targets' files in ``folder``."""
+    for name in names:
+        problem, options = target_problem(name, n)
+        yield name, problem, options
+    for name in meshes:
+        problem, options = target_problem(name, n)
+        sub = folder / name
+        sub.mkdir(parents=True, exist_ok=True)
+        path = grid_obj(problem.target, sub)
+        yield f"{name} grid.obj", replace(problem, target=rq.surfaces.Mesh(path)), options
+
+
+def pct(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.3f}%"
+
+
+def main_table(rows: list[dict], run: Run, n: int) -> str:
+    lines = [f"# Correspondence: fixed lattice against free, {n} x {n} panels\n", run.header()
+             + f"; OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}",
+             "", "Shape distances over the diameter; free / lattice: the free mode's "
+             "rms_surface over the lattice mode's.", "",
+             "| target | mode | rms_surface | hausdorff | rms_surface_vertices | coverage | "
+             "iterations | time (s) | min grid step | free / lattice | status |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lattice = {r["target"]: r for r in rows if r["mode"] == "lattice"}
+    for r in rows:
+        base = lattice.get(r["target"], {}).get("rms_surface")
+        ratio = (None if r["mode"] != "free" or base is None or "rms_surface" not in r
+                 else r["rms_surface"] / base)
+        lines.append(
+            f"| {r['target']} | {r['mode']} | {pct(r.get('rms_surface'))} | "
+            f"{pct(r.get('hausdorff'))} | {pct(r.get('rms_surface_vertices'))} | "
+            f"{fmt(r.get('coverage'), '.4f')} | {fmt(r.get('iterations'), 'd')} | "
+            f"{r['time']:.1f} | {fmt(r.get('min_step'), '.2f')} | {fmt(ratio, '.2f')} | "
+            f"{r['status']} |")
+    return "\n".join(lines) + "\n"
+
+
+def weight_table(rows: list[dict]) -> str:
+    lines = ["", "## The grid's Tikhonov weight (free mode)", "",
+             f"GRID_REGULARIZATION = {transcription.GRID_REGULARIZATION:g} x the factor "
+             "(of the \"regularization\" weight).", "",
+             "| target | factor | rms_surface | rms_surface_vertices | iterations | time (s) | "
+             "min grid step | status |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['target']} | {r['factor']:g} | {pct(r.get('rms_surface'))} | "
+                     f"{pct(r.get('rms_surface_vertices'))} | "
+                     f"{fmt(r.get('iterations'), 'd')} | {r['time']:.1f} | "
+                     f"{fmt(r.get('min_step'), '.2f')} | {r['status']} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--panels", type=int, default=20)
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    add_smoke(parser)
+    args = parser.parse_args(argv)
+    names, meshes, n, out, factors = TARGETS, MESH_TARGETS, args.panels, args.out, GRID_WEIGHTS
+    if args.smoke:
+        names, meshes, n, out, factors = ("sphere_cap",), (), 8, smoke_dir("correspondence"), ()
+    sizes = () if args.smoke else SIZES
+    run = Run()
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        for label, problem, options in designs(names, meshes, n, Path(folder)):
+            for mode in MODES:
+                rows.append(solve(label, replace(problem, correspondence=mode), options))
+                print(rows[-1], file=sys.stderr, flush=True)
+    weights = []
+    base = transcription.GRID_REGULARIZATION
+    try:
+        for name in names:
+            problem, options = target_problem(name, n, correspondence="free")
+            for factor in factors:
+                transcription.GRID_REGULARIZATION = base * factor
+                weights.append({**solve(name, problem, options), "factor": factor})
+                print(weights[-1], file=sys.stderr, flush=True)
+    finally:
+        transcription.GRID_REGULARIZATION = base
+    costs = [iteration_cost(size, mode) for size in sizes for mode in MODES]
+    text = (main_table(rows, run, n) + (weight_table(weights) if weights else "")
+            + (cost_table(costs) if costs else ""))
+    write_table(out / "correspondence_choice.md", text)
+
+
+if __name__ == "__main__":
+    main()
