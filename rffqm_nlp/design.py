@@ -740,13 +740,17 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
 
     For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
     WORKING_SET * (P Q) ** WORKING_SET_POWER * 3 (P + Q) (the build's peak and the working
-    set added, though they do not coincide: an upper estimate); IPOPT MEMORY_BASE +
-    MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for the sequential
-    transcription)."""
+    set added, though they do not coincide: an upper estimate), the design's 3 (P + Q)
+    growing by the 2 (P/2 + 1) (Q/2 + 1) grid variables of a free correspondence (an
+    extrapolation, not measured); IPOPT MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q
+    (plus MEMORY_SEQUENTIAL_BUILD for the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
     if options.solver == LM:
-        working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * 3.0 * (P + Q)
+        design = 3.0 * (P + Q)
+        if problem.correspondence == "free":
+            design += 2.0 * (P / 2 + 1) * (Q / 2 + 1)
+        working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * design
         need = MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + working_set
     else:
         need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q

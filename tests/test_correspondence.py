@@ -164,3 +164,13 @@ def test_a_free_result_saves_and_reloads(free, tmp_path):
     np.testing.assert_array_equal(back.target_points, result.target_points)
     for mine, theirs in zip(again.grid(back), problem.grid(result)):
         np.testing.assert_array_equal(mine, theirs)
+
+
+def test_the_memory_estimate_counts_the_grid_for_levenberg_marquardt():
+    problem, options = sphere_cap()
+    big = {c: replace(problem, panels=(100, 100), correspondence=c) for c in ("lattice", "free")}
+    estimate = {c: design.memory_estimate(p, options) for c, p in big.items()}
+    assert estimate["free"] > 1.3 * estimate["lattice"]
+    ipopt = replace(options, solver="ipopt")
+    assert (design.memory_estimate(big["free"], ipopt)
+            == design.memory_estimate(big["lattice"], ipopt))
