@@ -16,12 +16,21 @@ Method.
   distance (the smallest of the nine segment-segment distances and the six vertex-face
   distances whose foot lies inside the face). The distance between two panels is the
   smallest of their four triangle pairs.
-* Broad phase: a :class:`scipy.spatial.cKDTree` on panel centres at each coarse sample;
-  candidate pairs are the panels whose bounding spheres, grown by the clearance and a
-  margin of the largest panel radius, overlap at either end of a coarse step. Its tables
-  (centres, radii, each step's centre displacements and spins) are float32 and held by
-  column; every sphere gap they give is lowered, every motion bound raised, by a bound on
-  the float32 rounding, so they drop no pair that the float64 arithmetic would keep.
+* Broad phase, one :class:`scipy.spatial.cKDTree` per coarse step [w0, w1], on the panel
+  centres at w0. It must give every pair that the step's sphere gaps g(w0), g(w1) (centre
+  distance minus both radii) and its cheapest motion bound m (below) do not certify clear,
+  (g(w0) + g(w1) - m) / 2 <= clearance, however far apart. With an affine fit of the
+  centres' displacements over the step, D_p = A C_p + t + e_p (least squares on the
+  centres' leading principal directions), and L the spectral norm of A,
+  |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, so every such pair has g(w0) <= G_p + G_q
+  with a reach per panel G_p = (clearance + (SAFETY + 1) (L r_p + |e_p|) + SAFETY s_p) /
+  (2 - (SAFETY + 1) L) (r its radius, s its spin: its largest vertex displacement about
+  its centre); the tree query finds the centres within r_p + G_p + r_q + G_q (with very
+  unequal reaches, the largest ones queried apart). A folding sheet's centres move nearly
+  affinely over a short step, so the reaches are a fraction of a panel. Its tables
+  (centres, radii, reaches, displacements and spins) are float32 and held by column;
+  every gap they give is lowered, every bound raised, by a bound on the float32 rounding,
+  so they drop no pair that the float64 arithmetic would keep.
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair is certified clear when
   (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance and m bounds how far
@@ -49,10 +58,9 @@ Method.
 * Guarantee and its assumptions: no contact is missed provided that within one step the
   path of every vertex relative to another, and of every vertex in the frame of another
   panel, is at most SAFETY times its chord (smooth motion on short steps; the second,
-  added with the frame bound, is of the same kind as the first) and no two panels farther
-  apart than the margin at both ends of a coarse step pass through each other within it; a
-  pair whose distance dips below the clearance only between two samples less than ``tol``
-  apart may be missed (a near miss shorter than ``tol`` in omega).
+  added with the frame bound, is of the same kind as the first); the broad phase adds no
+  assumption. A pair whose distance dips below the clearance only between two samples
+  less than ``tol`` apart may be missed (a near miss shorter than ``tol`` in omega).
 * Flat overlaps: at omega = 0 every panel is a convex quadrilateral in the plane; two
   panels overlap when their interiors do (a separating-axis test on the eight edge
   normals, touching along an edge or at a corner is not an overlap).
@@ -76,8 +84,8 @@ SAFETY = 2.0
 #: Separating-axis gaps below this times the pattern's scale count as touching.
 REL_EPS = 1e-12
 
-#: The broad phase queries the panels larger than the 90th percentile of the radii apart
-#: only when the largest radius exceeds this times that percentile.
+#: The broad phase queries the panels whose reach (radius plus reach) exceeds their 90th
+#: percentile apart when the largest exceeds this times that percentile.
 SPLIT = 2.0
 
 #: Rows of a state's panel table (:class:`_States`).
@@ -149,11 +157,7 @@ class _Geometry:
 
     Panels are numbered p = (i-1) M + (j-1); ``corners`` (P, 4) holds the flat vertex
     indices of a, b, c, d; ``radius`` (P,) the distance from a panel's centroid to its
-    farthest corner (constant: panels are rigid); ``big`` the panels whose radius exceeds
-    ``rho``, ``is_big`` (P,) its mask: when the largest radius exceeds SPLIT times their
-    90th percentile, ``rho`` is that percentile and the broad phase queries the big panels
-    apart (patterns of very unequal panels); else ``rho`` is the largest radius and
-    ``big`` is empty (one tree query is cheaper than two).
+    farthest corner (constant: panels are rigid).
     """
 
     def __init__(self, pat: Pattern):
@@ -166,10 +170,6 @@ class _Geometry:
         Q = X[self.corners]
         self.radius = np.linalg.norm(Q - Q.mean(axis=1, keepdims=True), axis=2).max(axis=1)
         self.scale = float(np.ptp(X, axis=0).max()) or 1.0
-        r90 = float(np.quantile(self.radius, 0.9))
-        self.rho = (r90 if self.radius.max() > SPLIT * r90 else self.radius.max()) * (1 + 1e-6)
-        self.is_big = self.radius > self.rho
-        self.big = np.flatnonzero(self.is_big)
 
     def states(self, omegas: np.ndarray) -> np.ndarray:
         """Folded vertex positions (K, (N+1)(M+1), 3) at the omegas (K,)."""
@@ -187,43 +187,48 @@ class _Geometry:
 
 def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
     """Pairs (n, 2), p < q, sharing no vertex, whose spheres grown by ``reach`` overlap."""
-    p, q, _ = _near(geo, _table(geo, C, np.float64), reach)
+    T = _table(geo, C, np.full(len(C), reach / 2), np.float64)
+    p, q, _ = _near(geo, T, _slack(geo, C))
     return np.stack([p, q], axis=1)
 
 
-def _table(geo: _Geometry, C: np.ndarray, dtype: type) -> np.ndarray:
-    """The broad phase's panel table (6, P), one row per quantity (gathers by column are
-    several times faster than by panel): centroid x, y, z (from C (P, 3)), radius, i, j."""
-    return np.concatenate([C.T, geo.radius[None], geo.ij.T]).astype(dtype)
+def _table(geo: _Geometry, C: np.ndarray, G: np.ndarray, dtype: type) -> np.ndarray:
+    """The broad phase's panel table (7, P), one row per quantity (gathers by column are
+    several times faster than by panel): centroid x, y, z (from C (P, 3)), radius, i, j
+    and the panel's reach G (P,) (:func:`_near`)."""
+    return np.concatenate([C.T, geo.radius[None], geo.ij.T, G[None]]).astype(dtype)
 
 
-def _near(geo: _Geometry, T: np.ndarray, reach: float) -> tuple[np.ndarray, ...]:
-    """The pairs p < q (n,) sharing no vertex whose bounding spheres are at most ``reach``
-    apart, from a panel table T (:func:`_table`), and those gaps g (n,) (:func:`_gap`,
-    in T's precision; the tree's radius allows for float32 rounding)."""
-    pq = _candidates(geo, T[:3].T, reach)                            # (2, n)
-    A, B = T.take(pq[0], axis=1, mode="clip"), T.take(pq[1], axis=1, mode="clip")  # (6, n)
+def _near(geo: _Geometry, T: np.ndarray, slack: float) -> tuple[np.ndarray, ...]:
+    """The pairs p < q (n,) sharing no vertex whose sphere gap is at most G_p + G_q, the
+    panels' reaches, from a panel table T (:func:`_table`, its first 7 rows), and those
+    gaps g (n,) (:func:`_gap`, in T's precision; ``slack`` bounds its rounding error)."""
+    pq = _candidates(T[:3].T, T[3] + T[6], 2 * slack)                # (2, n)
+    A, B = T.take(pq[0], axis=1, mode="clip"), T.take(pq[1], axis=1, mode="clip")  # (7, n)
     g = _gap(A, B)
     keep = np.flatnonzero((np.maximum(np.abs(A[4] - B[4]), np.abs(A[5] - B[5])) >= 2)
-                          & (g <= reach))
+                          & (g <= A[6] + B[6] + 2 * slack))
     return pq[0, keep], pq[1, keep], g[keep]
 
 
-def _candidates(geo: _Geometry, X: np.ndarray, reach: float) -> np.ndarray:
-    """Pairs (2, n), p < q, each once, among them every pair of panels with centroids X
-    (P, 3) whose bounding spheres are at most ``reach`` apart: one tree query for the
-    pairs of panels no larger than ``geo.rho`` (a radius that need not cover the largest
-    panel), one for the pairs with a larger panel."""
-    slack = _slack(geo, X)
+def _candidates(X: np.ndarray, R: np.ndarray, slack: float) -> np.ndarray:
+    """Pairs (2, n), p < q, each once, among them every pair of points X (P, 3) at most
+    R_p + R_q + ``slack`` apart (R (P,) >= 0): one tree query with twice the largest R;
+    or, when the largest R exceeds SPLIT times their 90th percentile rho (very unequal
+    panels), one with 2 rho for the pairs of points with R <= rho and one for the pairs
+    with a larger R."""
     tree = cKDTree(X)
-    pq = tree.query_pairs(2 * geo.rho + reach + slack, output_type="ndarray").reshape(-1, 2)
-    if geo.big.size == 0:
-        return np.ascontiguousarray(pq.T)
-    pq = pq[~(geo.is_big[pq[:, 0]] | geo.is_big[pq[:, 1]])]
-    ij = cKDTree(X[geo.big]).sparse_distance_matrix(
-        tree, 2 * geo.radius.max() + reach + slack, output_type="ndarray")
-    b, j = geo.big[ij["i"]], ij["j"]
-    ok = (b != j) & (~geo.is_big[j] | (b < j))                      # big-big pairs once
+    rho = float(np.quantile(R, 0.9))
+    if R.max() <= SPLIT * rho:
+        return tree.query_pairs(2 * float(R.max()) + slack, output_type="ndarray").reshape(-1, 2).T
+    is_big = R > rho
+    big = np.flatnonzero(is_big)
+    pq = tree.query_pairs(2 * rho + slack, output_type="ndarray").reshape(-1, 2)
+    pq = pq[~(is_big[pq[:, 0]] | is_big[pq[:, 1]])]
+    ij = cKDTree(X[big]).sparse_distance_matrix(tree, 2 * float(R.max()) + slack,
+                                                output_type="ndarray")
+    b, j = big[ij["i"]], ij["j"]
+    ok = (b != j) & (~is_big[j] | (b < j))                          # big-big pairs once
     b, j = b[ok], j[ok]
     return np.concatenate([pq.T, np.stack([np.minimum(b, j), np.maximum(b, j)])], axis=1)
 
@@ -383,7 +388,7 @@ def _first_contact(geo: _Geometry, w_max: float, clearance: float,
     W = abs(w_max)
     n_steps = max(1, int(np.ceil(W / MAX_STEP)))
     st = _States(geo, sign, np.linspace(0.0, W, n_steps + 1))
-    rows, m = _coarse_rows(geo, st, n_steps + 1, geo.radius.max() + clearance, clearance)
+    rows, m = _coarse_rows(geo, st, n_steps + 1, clearance)
     best, contact = np.inf, []
     while rows.size:
         omegas = np.asarray(st.omegas)
@@ -603,47 +608,66 @@ def _most_of(xs: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _coarse_rows(geo: _Geometry, st: _States, K: int, margin: float,
+def _coarse_rows(geo: _Geometry, st: _States, K: int,
                  clearance: float) -> tuple[np.ndarray, np.ndarray]:
     """Rows (n, 4) = (state a, state b, p, q): for every step between the K coarse states
-    (the first K of ``st``), the pairs whose spheres grown by ``margin`` overlap at either
-    end (:func:`_near`, one tree per state) and that the sphere gaps do not certify clear;
-    and SAFETY times the rows' motion bound (n,) used here, the centres' relative
-    displacement plus each panel's largest vertex displacement about its centre (at least
-    :func:`_motion`'s). The tree of state k gives the pairs of the step after it, and
-    those of the step before it that were not near at its start."""
+    (the first K of ``st``), every pair that the sphere gaps g(a), g(b) and the rows'
+    motion bound m do not certify clear, (g(a) + g(b) - m) / 2 <= clearance; and those
+    bounds m (n,), SAFETY times the centres' relative displacement plus each panel's
+    largest vertex displacement about its centre (at least :func:`_motion`'s). One tree
+    per step, on the centres at its start, with the panels' reaches of :func:`_reach`."""
     P = geo.N * geo.M
-    C = st.T[:K, 12:15]                                              # (K, 3, P)
-    dC = C[1:] - C[:-1]
-    Q = st.T[:K, :12].reshape(K, 3, 4, P)
-    dQ = Q[1:] - Q[:-1] - dC[:, :, None]                             # (K-1, 3, 4, P)
-    spin = _most_of(list(np.sqrt(dQ[:, 0] ** 2 + dQ[:, 1] ** 2 + dQ[:, 2] ** 2).transpose(1, 0, 2)))
-    f32 = np.float32                             # the broad phase only, with a slack eps:
-    eps = _slack(geo, C)                         # gaps - eps, bounds + eps are safe
-    reach = margin + eps
-    Cx = np.concatenate([C[:1], C, C[-1:]]).astype(f32)              # C[k -+ 1], ends padded
-    sx = np.concatenate([np.zeros((1, P)), spin, np.zeros((1, P))]).astype(f32)
     rows, bounds = [], []
-
-    def keep(k, p, q, g0, g1, m):                # step k's pairs the sphere gaps do not clear
-        k_ = np.flatnonzero((g0 + g1 - m) / 2 <= clearance + 2 * eps)
-        rows.append(np.stack([np.full(len(k_), k), np.full(len(k_), k + 1), p[k_], q[k_]], axis=1))
-        bounds.append(m[k_].astype(float) + eps)
-
-    for k in range(K):
-        T = _table(geo, C[k].T, f32)
-        p, q, g = _near(geo, T, reach)
-        X = np.concatenate([T[:4], Cx[k], Cx[k + 2], sx[k:k + 2]])   # (12, P)
-        A, B = X.take(p, axis=1, mode="clip"), X.take(q, axis=1, mode="clip")
-        if k + 1 < K:                            # the step after k: every pair near at k
-            keep(k, p, q, g, _gap(A, B, 7), SAFETY * (_shift(A, B, 0, 7) + A[11] + B[11]))
-        if k > 0:                                # the step before k: those near at k only
-            g0 = _gap(A, B, 4)
-            new = np.flatnonzero(g0 > reach)
-            A, B = A[:, new], B[:, new]
-            keep(k - 1, p[new], q[new], g0[new], g[new],
-                 SAFETY * (_shift(A, B, 4, 0) + A[10] + B[10]))
+    for a, b in zip(range(K - 1), range(1, K)):
+        Ta, Tb = st.T[a], st.T[b]
+        C, D = Ta[12:15], Tb[12:15] - Ta[12:15]                      # (3, P)
+        dQ = (Tb[:12] - Ta[:12]).reshape(3, 4, P) - D[:, None]
+        spin = _most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
+        G = _reach(C, D, spin, geo.radius, clearance)
+        f32 = np.float32                 # the broad phase only; gaps - eps, bounds + eps
+        eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())   # are safe
+        X = np.concatenate([_table(geo, C.T, G, f32), Tb[12:15].astype(f32),
+                            spin[None].astype(f32)])                 # (11, P)
+        p, q, g0 = _near(geo, X, eps)
+        Y = X[[0, 1, 2, 3, 7, 8, 9, 10]]                             # C(a), r, C(b), spin
+        A, B = Y.take(p, axis=1, mode="clip"), Y.take(q, axis=1, mode="clip")
+        m = SAFETY * (_shift(A, B, 0, 4) + A[7] + B[7])
+        kept = np.flatnonzero((g0 + _gap(A, B, 4) - m) / 2 <= clearance + 2 * eps)
+        rows.append(np.stack([np.full(len(kept), a), np.full(len(kept), b), p[kept], q[kept]],
+                             axis=1))
+        bounds.append(m[kept].astype(float) + eps)
     return np.concatenate(rows), np.concatenate(bounds)
+
+
+def _reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
+           clearance: float) -> np.ndarray:
+    """The panels' reaches G (P,) over a step: every pair whose sphere gaps g(a), g(b) at
+    its start and end and motion bound m = SAFETY (|D_p - D_q| + spin_p + spin_q) leave
+    (g(a) + g(b) - m) / 2 <= clearance has g(a) <= G_p + G_q. From the centres C (3, P)
+    at the start, their displacements D (3, P), the spins (P,) and radii r (P,).
+
+    With an affine fit D_p = A C_p + t + e_p and L = |A| (spectral norm),
+    |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, |C_p - C_q| = g(a) + r_p + r_q and g(b) >=
+    g(a) - |D_p - D_q|; so such a pair has g(a) (2 - (SAFETY + 1) L) <= 2 clearance + h_p +
+    h_q, h = (SAFETY + 1) (L r + |e|) + SAFETY spin. The fit: least squares on the k
+    leading principal directions of the centres (k = 0: A = 0, a translation; a sheet
+    still nearly flat makes the third direction ill-conditioned), the k of the smallest
+    largest reach among those with (SAFETY + 1) L < 2."""
+    X = C - C.mean(axis=1, keepdims=True)
+    E = D - D.mean(axis=1, keepdims=True)                           # t = mean(D) - A mean(C)
+    lam, U = np.linalg.eigh(X @ X.T)                                # X's principal directions
+    U, lam, EX = U[:, ::-1], lam[::-1], E @ X.T                     # largest first
+    best = None
+    for k in range(4):                           # A = E X^T U_k diag(1 / lam_k) U_k^T
+        A = (EX @ U[:, :k] / np.where(lam[:k] > 0, lam[:k], np.inf)) @ U[:, :k].T
+        L = float(np.linalg.norm(A, 2))
+        if (SAFETY + 1) * L >= 2:
+            continue
+        e = _norm((E - A @ X).T)
+        G = (clearance + (SAFETY + 1) * (L * r + e) + SAFETY * spin) / (2 - (SAFETY + 1) * L)
+        if best is None or (r + G).max() < (r + best).max():
+            best = G
+    return best
 
 
 def _split(rows: np.ndarray, st: _States) -> np.ndarray:

@@ -4,11 +4,14 @@ a z-fold contact computed by hand, refinement, clearance, the paper's random rec
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
+from scipy.spatial import cKDTree
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model as nm
@@ -17,6 +20,8 @@ from rffqm_nlp.collisions import (CollisionReport, _coarse_rows, _distance, _Geo
                                   triangle_distance, triangles_intersect)
 from rffqm_nlp.errors import InputError
 from rffqm_nlp.lengths import side_length_lp
+
+collisions_module = importlib.import_module("rffqm_nlp.collisions")
 
 
 def non_adjacent(geo: _Geometry, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -302,20 +307,37 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     assert np.mean(m < 0.5 * brute) > 0.1          # the panel frames do better for some
 
 
+class CountingTree(cKDTree):
+    """A k-d tree that counts the queries of the big panels apart (the split broad phase)."""
+    splits = 0
+
+    def sparse_distance_matrix(self, *args, **kwargs):
+        CountingTree.splits += 1
+        return super().sparse_distance_matrix(*args, **kwargs)
+
+
+@pytest.fixture
+def tree_splits(monkeypatch):
+    """The number of split broad-phase queries made under the test (a callable)."""
+    monkeypatch.setattr(collisions_module, "cKDTree", CountingTree)
+    CountingTree.splits = 0
+    return lambda: CountingTree.splits
+
+
 @pytest.mark.parametrize("seed, clearance, split", [(29, 0.0, False), (29, 0.05, False),
                                                    (16, 0.0, True), (16, 0.05, True)])
-def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, split):
-    """The broad phase (one tree per coarse state, float32 tables; with very unequal panels
-    the big ones queried apart) keeps every pair that a float64 scan of all pairs finds
-    within the margin at either end of a coarse step and not cleared by its sphere gaps
-    and motion bound, with a motion bound at least as large."""
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, split,
+                                                             tree_splits):
+    """The broad phase (one tree per coarse step with the panels' reaches, float32 tables;
+    with very unequal reaches the big ones queried apart) keeps every pair that a float64
+    scan of all pairs finds not cleared by its sphere gaps and motion bound over a coarse
+    step, however far apart, with a motion bound at least as large."""
     pat = random_recipe(seed)
     geo = _Geometry(pat)
-    assert (geo.big.size > 0) == split
-    K = 13
+    K = 25
     states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
-    margin = geo.radius.max() + clearance
-    rows, m = _coarse_rows(geo, states, K, margin, clearance)
+    rows, m = _coarse_rows(geo, states, K, clearance)
+    assert (tree_splits() > 0) == split
     got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
     p, q = np.triu_indices(pat.N * pat.M, 1)
     keep = non_adjacent(geo, p, q)
@@ -329,7 +351,7 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, s
         dC = C[k + 1] - C[k]
         spin = np.linalg.norm(Q[k + 1] - Q[k] - dC[:, None], axis=2).max(axis=1)
         mk = 2.0 * (np.linalg.norm(dC[p] - dC[q], axis=1) + spin[p] + spin[q])
-        need = (np.minimum(g0, g1) <= margin) & ((g0 + g1 - mk) / 2 <= clearance)
+        need = (g0 + g1 - mk) / 2 <= clearance
         for a, b, bound in zip(p[need], q[need], mk[need]):
             assert got[(k, k + 1, a, b)] >= bound
         expected += need.sum()
@@ -342,32 +364,32 @@ def perturbed_miura(seed: int) -> rq.Pattern:
 
 
 @pytest.mark.parametrize("make, seed, clearance, omega_max, split", [
-    (perturbed_miura, 0, 0.4, 3.0, False),      # similar panels: one tree query per state
+    (perturbed_miura, 0, 0.4, 3.0, False),      # similar panels: one tree query per step
     (perturbed_miura, 1, 0.2, 3.0, False),
     (random_recipe, 11, 0.03, 2.4, True),       # very unequal panels: big ones queried apart
     (random_recipe, 16, 0.03, 2.4, True)])
-def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, omega_max, split):
-    """Ground truth for the whole broad phase (trees, sphere gaps, float32 slack, motion
-    bounds): every pair sharing no vertex that an all-pairs scan finds within the
+def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, omega_max, split,
+                                                       tree_splits):
+    """Ground truth for the whole broad phase (trees, reaches, sphere gaps, float32 slack,
+    motion bounds): every pair sharing no vertex that an all-pairs scan finds within the
     clearance at some omega of a coarse step (5 samples a step, its ends included) is a
     row of that step; and the reported first contact is no later than the scan's. The
-    steps are longer than the library's (more motion within one), so that the margin
-    matters."""
+    coarse steps are longer than the library's (more motion within one, larger
+    reaches)."""
     pat = make(seed)
     geo = _Geometry(pat)
-    assert (geo.big.size > 0) == split
     K = 4
     omegas = np.linspace(0.0, omega_max, K)
-    rows, _ = _coarse_rows(geo, _States(geo, 1.0, omegas), K, geo.radius.max() + clearance,
-                           clearance)
+    rows, _ = _coarse_rows(geo, _States(geo, 1.0, omegas), K, clearance)
+    assert (tree_splits() > 0) == split
     got = {(a, geo.label(p, q)) for a, _, p, q in rows.tolist()}
     found, first = 0, np.inf
     for k in range(K - 1):
-        for w in np.linspace(omegas[k], omegas[k + 1], 5):
-            close = [pair for pair, d in all_pair_distances(pat, w).items() if d <= clearance]
+        for x in np.linspace(omegas[k], omegas[k + 1], 5):
+            close = [pair for pair, d in all_pair_distances(pat, x).items() if d <= clearance]
             assert all((k, pair) in got for pair in close)
             found += len(close)
-            first = min(first, w) if close else first
+            first = min(first, x) if close else first
     assert found > 0
     rep = collisions(pat, omega_max, clearance=clearance)
     assert rep.first_omega is not None and rep.first_omega <= first
