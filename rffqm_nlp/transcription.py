@@ -7,9 +7,10 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
 * ``simultaneous``: every vertex angle and side is a variable and the marching equations are
   equality constraints, panel by panel (many variables, sparse Jacobians).
 
-Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term and the
+Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term, the
 inline constraints (angle bounds, multiplier margins, the boundary MV assignment, sides
-against the mean side), so they state the same problem.
+against the mean side) and a free correspondence's grid (:class:`Correspondence`), so they
+state the same problem.
 """
 
 from __future__ import annotations
@@ -268,14 +269,14 @@ class Correspondence:
         uniform cell's, at least :data:`MIN_GRID_STEP` and its square."""
         du, dv = self.steps
         steps = ca.vertcat(ca.vec(U[1:, :] - U[:-1, :]) / du, ca.vec(V[:, 1:] - V[:, :-1]) / dv)
-        corner = {(a, b): (U[a:U.shape[0] - 1 + a, b:U.shape[1] - 1 + b],
-                           V[a:V.shape[0] - 1 + a, b:V.shape[1] - 1 + b])
-                  for a in (0, 1) for b in (0, 1)}
+        # (u, v) of the cells' corners (a, b) = (i offset, j offset), each N x M
+        c = {(a, b): (U[a:U.shape[0] - 1 + a, b:U.shape[1] - 1 + b],
+                      V[a:V.shape[0] - 1 + a, b:V.shape[1] - 1 + b])
+             for a in (0, 1) for b in (0, 1)}
 
         def turn(p, q, o):  # orientation of the edges o -> p, o -> q
             return ((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])) / (du * dv)
 
-        c = corner
         turns = ca.vertcat(*(ca.vec(turn(c[p], c[q], c[o])) for p, q, o in (
             ((1, 0), (0, 1), (0, 0)), ((1, 1), (0, 0), (1, 0)),
             ((0, 1), (1, 0), (1, 1)), ((0, 0), (1, 1), (0, 1)))))
