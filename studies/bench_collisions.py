@@ -14,7 +14,8 @@ side-length LP; ``--lp-seeds``), whose very unequal side lengths made slow cases
 
 Times are CPU seconds of this process (``time.process_time``), so other jobs on a shared
 machine do not count; each is the smallest of ``--repeat`` runs (both sides of a ratio
-alike), since a loaded machine still slows a process down (shared caches and memory).
+alike, their runs alternated), since a loaded machine still slows a process down (shared
+caches and memory).
 Results are printed and written as Markdown.
 
 Usage: ``python studies/bench_collisions.py [--sizes 20,100] [--omega 2.0]
@@ -75,10 +76,15 @@ def first(rep) -> str:
 
 
 def row(n: int, name: str, bd: rq.BoundaryData, omega: float, repeat: int) -> dict:
-    """One table row: both timings on the same pattern."""
-    _, t_fold = cpu(lambda: nm.fold(nm.march(bd), np.linspace(0, omega, 100)), repeat)
+    """One table row: both timings on the same pattern, their runs alternated (so that
+    both sides of the ratio see the same load)."""
     pat = nm.march(bd)
-    rep, t_col = cpu(lambda: collisions(pat, omega), repeat)
+    t_fold = t_col = np.inf
+    for _ in range(repeat):
+        _, t = cpu(lambda: nm.fold(nm.march(bd), np.linspace(0, omega, 100)), 1)
+        t_fold = min(t_fold, t)
+        rep, t = cpu(lambda: collisions(pat, omega), 1)
+        t_col = min(t_col, t)
     return {"panels": f"{n} x {n}", "pattern": name, "omega*": f"{omega:g}",
             "march+fold [s]": f"{t_fold:.2f}", "collisions [s]": f"{t_col:.2f}",
             "ratio": f"{t_col / t_fold:.1f}", "free": str(rep.free), "first_omega": first(rep)}
@@ -127,8 +133,9 @@ def main() -> None:
             f"`python studies/bench_collisions.py --sizes {','.join(map(str, sizes))} "
             f"--omega {args.omega:g} --amplitude {args.amplitude:g} --lp-seeds "
             f"{','.join(map(str, seeds))} --repeat {repeat}`; CPU seconds of one process, "
-            f"the smallest of {repeat} runs each, on a machine shared with other jobs (load "
-            f"average {load} at the end). march+fold: `fold(march(bd), linspace(0, omega*, "
+            f"the smallest of {repeat} runs each (the two sides of a ratio alternated), on a "
+            f"machine shared with other jobs (load average {load} at the end). march+fold: "
+            "`fold(march(bd), linspace(0, omega*, "
             "100))`; collisions: `collisions(pattern, omega*)` (clearance 0, tol 1e-4). "
             "Goal (issue 20): ratio <= 2 at 100 x 100.\n\n" + table(rows, COLUMNS) + "\n\n"
             "The paper's Fig. Random recipe at 10 x 10 (Miura angles +-0.1 pi, side-length "
