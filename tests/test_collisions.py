@@ -358,6 +358,29 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, s
     assert expected > 0 and len(rows) >= expected
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.floats(0.0, 0.3), st.floats(0.0, 0.5),
+       st.floats(0.0, 0.3), st.sampled_from([0, 1, 2]))
+def test_reaches_bound_every_pair_the_spheres_do_not_clear(seed, strain, noise, clearance, flat):
+    """Random centres (flat in 0-2 directions), displacements an affine map plus noise,
+    random radii and spins: every pair whose sphere gaps at both ends and motion bound
+    leave (g(a) + g(b) - m) / 2 <= clearance has g(a) <= G_p + G_q (the reaches)."""
+    rng = np.random.default_rng(seed)
+    P = 40
+    C = rng.normal(0, 3, (3, P))
+    C[3 - flat:] *= 1e-9                                # a sheet (nearly) flat in some axes
+    D = strain * rng.normal(0, 1, (3, 3)) @ C + rng.normal(0, 1, (3, 1)) \
+        + noise * rng.normal(0, 1, (3, P))
+    r, spin = rng.uniform(0.1, 1.0, P), rng.uniform(0.0, 0.2, P)
+    G = collisions_module._reach(C, D, spin, r, clearance)
+    p, q = np.triu_indices(P, 1)
+    g0 = np.linalg.norm(C[:, p] - C[:, q], axis=0) - r[p] - r[q]
+    g1 = np.linalg.norm((C + D)[:, p] - (C + D)[:, q], axis=0) - r[p] - r[q]
+    m = 2.0 * (np.linalg.norm(D[:, p] - D[:, q], axis=0) + spin[p] + spin[q])
+    need = (g0 + g1 - m) / 2 <= clearance
+    assert np.all(g0[need] <= (G[p] + G[q])[need] + 1e-9)
+
+
 def perturbed_miura(seed: int) -> rq.Pattern:
     """A 6 x 6 Miura-ori (alpha0 = 1.2) with boundary angles perturbed by 0.02 pi."""
     return nm.march(rq.perturb_angles(rq.miura_boundary(6, 6, alpha0=1.2), 0.02 * np.pi, seed))
