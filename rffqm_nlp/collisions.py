@@ -84,8 +84,8 @@ SAFETY = 2.0
 #: Separating-axis gaps below this times the pattern's scale count as touching.
 REL_EPS = 1e-12
 
-#: The broad phase queries the panels whose reach (radius plus reach) exceeds their 90th
-#: percentile apart when the largest exceeds this times that percentile.
+#: The broad phase queries apart the panels whose radius plus reach exceeds the 90th
+#: percentile of those sums, when the largest sum exceeds this times that percentile.
 SPLIT = 2.0
 
 #: Rows of a state's panel table (:class:`_States`).
