@@ -724,14 +724,18 @@ MEMORY_BASE = 150e6
 #: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
 #: transcriptions with MUMPS' factor; "levenberg-marquardt": the build of the sparse
 #: Jacobians, its peak, and the marching) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 63e3, "simultaneous": 190e3, "sequential": 250e3}
+MEMORY_PER_PANEL = {"levenberg-marquardt": 60e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later
 #: level still needs, :class:`rffqm_nlp.reduced._Window`; fitted to 20 to 100 panels a side)
-#: by the 3 (P + Q) design variables, 8 bytes each.
+#: by the 3 (P + Q) design variables, 8 bytes each ...
 WORKING_SET, WORKING_SET_POWER = 17.6, 0.705
+#: ... and its dense design x design matrices held at once (J'J, the metric, the secant
+#: term, the damped matrix and its factor, the last iteration's, the step QP's copy):
+#: counted in reduced.py, not fitted; they matter for a free correspondence's large design.
+DESIGN_MATRICES = 10
 
 
 def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None) -> int:
@@ -739,10 +743,10 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     measurements, see :data:`MEMORY_BASE`; a multistart solves one start at a time).
 
     For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
-    WORKING_SET * (P Q) ** WORKING_SET_POWER * 3 (P + Q) (the build's peak and the working
-    set added, though they do not coincide: an upper estimate), the design's 3 (P + Q)
-    growing by the 2 (P/2 + 1) (Q/2 + 1) grid variables of a free correspondence (an
-    extrapolation, not measured); IPOPT MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q
+    WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2 (the
+    build's peak and the working set added, though they do not coincide: an upper
+    estimate), for n_d = 3 (P + Q) design variables plus the 2 (P/2 + 1) (Q/2 + 1) grid
+    variables of a free correspondence (an extrapolation, not measured); IPOPT MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q
     (plus MEMORY_SEQUENTIAL_BUILD for the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
@@ -751,7 +755,8 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
         if problem.correspondence == "free":
             design += 2.0 * (P / 2 + 1) * (Q / 2 + 1)
         working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * design
-        need = MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + working_set
+        need = (MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + working_set
+                + 8.0 * DESIGN_MATRICES * design ** 2)
     else:
         need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q
         if options.transcription == "sequential":
