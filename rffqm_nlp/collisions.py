@@ -16,21 +16,27 @@ Method.
   distance (the smallest of the nine segment-segment distances and the six vertex-face
   distances whose foot lies inside the face). The distance between two panels is the
   smallest of their four triangle pairs.
-* Broad phase, one :class:`scipy.spatial.cKDTree` per coarse step [w0, w1], on the panel
-  centres at w0. It must give every pair that the step's sphere gaps g(w0), g(w1) (centre
-  distance minus both radii) and its cheapest motion bound m (below) do not certify clear,
-  (g(w0) + g(w1) - m) / 2 <= clearance, however far apart. With an affine fit of the
-  centres' displacements over the step, D_p = A C_p + t + e_p (least squares on the
-  centres' leading principal directions), and L the spectral norm of A,
+* Broad phase, :class:`scipy.spatial.cKDTree` queries per coarse step [w0, w1], on the
+  panel centres at w0. They must give every pair that the step's sphere gaps g(w0),
+  g(w1) (centre distance minus both radii) and its cheapest motion bound m (below) do
+  not certify clear, (g(w0) + g(w1) - m) / 2 <= clearance, however far apart. With an
+  affine fit of the centres' displacements over the step, D_p = A C_p + t + e_p (least
+  squares on the centres' leading principal directions), and L the spectral norm of A,
   |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, so every such pair has g(w0) <= G_p + G_q
   with a reach per panel G_p = (clearance + (SAFETY + 1) (L r_p + |e_p|) + SAFETY s_p) /
   (2 - (SAFETY + 1) L) (r its radius, s its spin: its largest vertex displacement about
-  its centre); the tree query finds the centres within r_p + G_p + r_q + G_q (with very
-  unequal reaches, the largest ones queried apart). A folding sheet's centres move nearly
-  affinely over a short step, so the reaches are a fraction of a panel. Its tables
-  (centres, radii, reaches, displacements and spins) are float32 and held by column;
-  every gap they give is lowered, every bound raised, by a bound on the float32 rounding,
-  so they drop no pair that the float64 arithmetic would keep.
+  its centre); the tree queries find the centres within r_p + G_p + r_q + G_q (panels by
+  decreasing r + G, blocks of them queried against the panels from the block on, so that
+  very unequal reaches do not make every query large). A folding sheet's centres move
+  nearly affinely over a short step, so the reaches are a fraction of a panel. Every gap
+  is lowered, every bound raised, by a small slack (a bound on the rounding).
+* Memory: no step's pairs are held at once. The tree queries give their pairs in chunks
+  of about ``ROWS`` (the first block's count bounds it, each next block is sized from the
+  last one's pairs per panel), a step's rows are refined along the motion as they come
+  (in batches of at most ``ROWS`` rows, the coarse steps in order), and no step that
+  starts after the earliest contact found is looked at. The report does not depend on
+  the order or the batches: a pair in contact at a sample is found by every row that has
+  that sample, and only rows that start after the earliest contact found are dropped.
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair is certified clear when
   (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance and m bounds how far
@@ -84,15 +90,16 @@ SAFETY = 2.0
 #: Separating-axis gaps below this times the pattern's scale count as touching.
 REL_EPS = 1e-12
 
-#: The broad phase queries apart the panels whose radius plus reach exceeds the 90th
-#: percentile of those sums, when the largest sum exceeds this times that percentile.
-SPLIT = 2.0
-
 #: Rows of a state's panel table (:class:`_States`).
 _ROWS = 19
 
 #: Panel pairs per batch of the bounds and distances along the motion.
 BATCH = 2048
+
+#: Most panel pairs the broad phase and the refinement hold at once (tree query results,
+#: candidate rows of a step, rows of a refinement level), so that the check's memory
+#: grows like the pattern, not like its pairs.
+ROWS = 2 ** 18
 
 #: Triangle pairs per vectorised batch of the narrow phase (bounds its memory).
 CHUNK = 4096
@@ -187,50 +194,62 @@ class _Geometry:
 
 def _near_pairs(geo: _Geometry, C: np.ndarray, reach: float) -> np.ndarray:
     """Pairs (n, 2), p < q, sharing no vertex, whose spheres grown by ``reach`` overlap."""
-    T = _table(geo, C, np.full(len(C), reach / 2), np.float64)
-    p, q, _ = _near(geo, T, _slack(geo, C))
-    return np.stack([p, q], axis=1)
+    R = geo.radius + reach / 2
+    chunks = [np.stack([p, q], axis=1)
+              for p, q, _ in _close_pairs(geo, C, R, 2 * _slack(geo, C))]
+    return np.concatenate(chunks or [np.zeros((0, 2), dtype=np.int64)])
 
 
-def _table(geo: _Geometry, C: np.ndarray, G: np.ndarray, dtype: type) -> np.ndarray:
-    """The broad phase's panel table (7, P), one row per quantity (gathers by column are
-    several times faster than by panel): centroid x, y, z (from C (P, 3)), radius, i, j
-    and the panel's reach G (P,) (:func:`_near`)."""
-    return np.concatenate([C.T, geo.radius[None], geo.ij.T, G[None]]).astype(dtype)
+def _close_pairs(geo: _Geometry, C: np.ndarray, R: np.ndarray, slack: float):
+    """The pairs p < q sharing no vertex whose centres C (P, 3) are at most R_p + R_q +
+    ``slack`` apart (R (P,) >= 0), with those distances, in chunks (p, q, dist) (n,) of at
+    most ROWS pairs. Panels by decreasing R; the first 64 (or fewer, halved until the
+    tree counts at most ROWS pairs within twice the largest R of them) estimate the pairs
+    per panel. When one query with twice the largest R is expected to give at most
+    0.7 ROWS pairs, that query; otherwise each pair is found once, from the panel with the
+    larger R: a block of panels queried (a tree of its own) against a tree on the panels
+    from the block on, with twice the block's largest R, each block sized from the pairs
+    per panel of the last query for 0.7 ROWS (the query radius only shrinks)."""
+    order = np.argsort(-R, kind="stable")
+    X, R, ij = C[order], R[order], geo.ij[order]
+    P, c0, base, size = len(X), 0, 0, 64
+    rest = cKDTree(X)
+    while True:
+        head = cKDTree(X[:size])
+        found = head.count_neighbors(rest, 2 * float(R[0]) + slack)
+        if size == 1 or found <= ROWS:
+            break
+        size //= 2
+    if found * P / min(size, P) <= 1.4 * ROWS:   # ordered pairs, self included: one query
+        i, j = rest.query_pairs(2 * float(R[0]) + slack, output_type="ndarray").T
+        yield from _kept(order, R, ij, i, j, _norm(X[i] - X[j]), slack)
+        return
+    while c0 < P:
+        if 2 * (c0 - base) > P - base:          # a smaller tree on the panels still to come
+            base, rest = c0, cKDTree(X[c0:])
+        c1 = min(P, c0 + size)
+        head = cKDTree(X[c0:c1])
+        hits = head.sparse_distance_matrix(rest, 2 * float(R[c0]) + slack, output_type="ndarray")
+        i, j, dist = hits["i"] + c0, hits["j"] + base, hits["v"]
+        size = max(1, int(0.7 * (c1 - c0) * ROWS / max(len(hits), 1)))
+        del hits
+        yield from _kept(order, R, ij, i, j, dist, slack)
+        c0 = c1
 
 
-def _near(geo: _Geometry, T: np.ndarray, slack: float) -> tuple[np.ndarray, ...]:
-    """The pairs p < q (n,) sharing no vertex whose sphere gap is at most G_p + G_q, the
-    panels' reaches, from a panel table T (:func:`_table`, its first 7 rows), and those
-    gaps g (n,) (:func:`_gap`, in T's precision; ``slack`` bounds its rounding error)."""
-    pq = _candidates(T[:3].T, T[3] + T[6], 2 * slack)                # (2, n)
-    A, B = T.take(pq[0], axis=1, mode="clip"), T.take(pq[1], axis=1, mode="clip")  # (7, n)
-    g = _gap(A, B)
-    keep = np.flatnonzero((np.maximum(np.abs(A[4] - B[4]), np.abs(A[5] - B[5])) >= 2)
-                          & (g <= A[6] + B[6] + 2 * slack))
-    return pq[0, keep], pq[1, keep], g[keep]
-
-
-def _candidates(X: np.ndarray, R: np.ndarray, slack: float) -> np.ndarray:
-    """Pairs (2, n), p < q, each once, among them every pair of points X (P, 3) at most
-    R_p + R_q + ``slack`` apart (R (P,) >= 0): one tree query with twice the largest R;
-    or, when the largest R exceeds SPLIT times their 90th percentile rho (very unequal
-    panels), one with 2 rho for the pairs of points with R <= rho and one for the pairs
-    with a larger R."""
-    tree = cKDTree(X)
-    rho = float(np.quantile(R, 0.9))
-    if R.max() <= SPLIT * rho:
-        return tree.query_pairs(2 * float(R.max()) + slack, output_type="ndarray").reshape(-1, 2).T
-    is_big = R > rho
-    big = np.flatnonzero(is_big)
-    pq = tree.query_pairs(2 * rho + slack, output_type="ndarray").reshape(-1, 2)
-    pq = pq[~(is_big[pq[:, 0]] | is_big[pq[:, 1]])]
-    ij = cKDTree(X[big]).sparse_distance_matrix(tree, 2 * float(R.max()) + slack,
-                                                output_type="ndarray")
-    b, j = big[ij["i"]], ij["j"]
-    ok = (b != j) & (~is_big[j] | (b < j))                          # big-big pairs once
-    b, j = b[ok], j[ok]
-    return np.concatenate([pq.T, np.stack([np.minimum(b, j), np.maximum(b, j)])], axis=1)
+def _kept(order: np.ndarray, R: np.ndarray, ij: np.ndarray, i: np.ndarray, j: np.ndarray,
+          dist: np.ndarray, slack: float):
+    """Of the pairs i, j (n,) of panels by rank (``order`` (P,) the panels, R (P,) and ij
+    (P, 2) by rank) at distances ``dist`` (n,), those with j > i, at most R_i + R_j +
+    ``slack`` apart and sharing no vertex, as (p, q, dist) with p < q, in chunks of at
+    most ROWS."""
+    keep = np.flatnonzero((j > i) & (dist <= R[i] + R[j] + slack)
+                          & (np.maximum(np.abs(ij[i, 0] - ij[j, 0]),
+                                        np.abs(ij[i, 1] - ij[j, 1])) >= 2))
+    p, q, dist = order[i[keep]], order[j[keep]], dist[keep]
+    for k in range(0, len(p), ROWS):
+        a, b = p[k:k + ROWS], q[k:k + ROWS]
+        yield np.minimum(a, b), np.maximum(a, b), dist[k:k + ROWS]
 
 
 def _slack(geo: _Geometry, C: np.ndarray) -> float:
@@ -248,10 +267,10 @@ def _gap(A: np.ndarray, B: np.ndarray, at: int = 0) -> np.ndarray:
     return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - A[3] - B[3]
 
 
-def _shift(A: np.ndarray, B: np.ndarray, a: int, b: int) -> np.ndarray:
-    """Relative displacement (n,) of two panels' centres, |(A[b:b+3] - A[a:a+3]) -
-    (B[b:b+3] - B[a:a+3])|, from the columns A, B (w, n) of a panel table."""
-    d = [A[b + k] - A[a + k] - B[b + k] + B[a + k] for k in range(3)]
+def _shift(A: np.ndarray, B: np.ndarray, at: int) -> np.ndarray:
+    """Relative displacement (n,) of two panels' centres, |D_p - D_q|, from the columns
+    A, B (w, n) of a panel table with the centres' displacements in rows at..at+2."""
+    d = [A[at + k] - B[at + k] for k in range(3)]
     return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
@@ -383,45 +402,90 @@ def _flat_overlaps(geo: _Geometry) -> list[PanelPair]:
 
 def _first_contact(geo: _Geometry, w_max: float, clearance: float,
                    tol: float) -> tuple[float | None, list[PanelPair]]:
-    """The earliest |omega| in [0, |w_max|] with two panels within ``clearance``, signed."""
+    """The earliest |omega| in [0, |w_max|] with two panels within ``clearance``, signed.
+    The coarse steps in order, their rows refined as the broad phase gives them, once at
+    least ROWS are held (or at the end); no step that starts after the earliest contact
+    found is looked at."""
     sign = -1.0 if w_max < 0 else 1.0
     W = abs(w_max)
     n_steps = max(1, int(np.ceil(W / MAX_STEP)))
     st = _States(geo, sign, np.linspace(0.0, W, n_steps + 1))
-    rows, m = _coarse_rows(geo, st, n_steps + 1, clearance)
-    best, contact = np.inf, []
-    while rows.size:
+    found, held = _Contact(geo), []
+    for a in range(n_steps):
+        if st.omegas[a] > found.best:
+            break
+        for chunk in _coarse_rows(geo, st, a, clearance):
+            held.append(chunk)
+            if sum(len(rows) for rows, _ in held) >= ROWS:
+                _refine(st, *_joined(held), clearance, tol, found)
+                held = []
+    if held:
+        _refine(st, *_joined(held), clearance, tol, found)
+    if not np.isfinite(found.best):
+        return None, []
+    return sign * float(found.best) if found.best > 0 else 0.0, found.pairs
+
+
+def _joined(chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Chunks (rows (n, 4), bounds (n,)) put together."""
+    return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
+
+
+class _Contact:
+    """The earliest contact found so far: its |omega| ``best`` (inf: none) and the panel
+    pairs in contact there (1-based labels, sorted)."""
+
+    def __init__(self, geo: _Geometry):
+        self.geo, self.best, self.pairs = geo, np.inf, []
+
+    def record(self, w: np.ndarray, hit: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
+        """Take the pairs p, q (n,) in contact (``hit`` (n,) bool) at the |omega| w (n,)
+        into account."""
+        if not hit.any() or w[hit].min() > self.best:
+            return
+        w_hit = w[hit].min()
+        at = hit & (w == w_hit)
+        new = [self.geo.label(a, b) for a, b in zip(p[at], q[at])]
+        self.pairs = sorted(set(new + (self.pairs if w_hit == self.best else [])))
+        self.best = w_hit
+
+
+def _refine(st: _States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: float,
+            found: _Contact) -> None:
+    """Follow the rows (n, 4) = (state a, state b, p, q), with upper bounds m (n,) on the
+    change of their distance (inf: none yet), into the halves of their steps until each
+    is certified clear, in contact at a sample, or shorter than ``tol``; contacts go to
+    ``found``, rows that start after its earliest contact are dropped. In batches of at
+    most ROWS rows (a stack of the halves still to follow)."""
+    stack = [(rows, m)]
+    while stack:
+        rows, m = stack.pop()
+        if len(rows) > ROWS:
+            stack.append((rows[ROWS:], m[ROWS:]))
+            rows, m = rows[:ROWS], m[:ROWS]
         omegas = np.asarray(st.omegas)
-        keep = omegas[rows[:, 0]] < best
+        keep = omegas[rows[:, 0]] <= found.best
         rows, m = rows[keep], m[keep]
         if not rows.size:
-            break
+            continue
         ia, ib, p, q = rows.T
         wa, wb, n = omegas[ia], omegas[ib], len(rows)
         d = _per_state(_lower_bound, st, np.concatenate([ia, ib]), np.tile(p, 2),
                        np.tile(q, 2))
         da, db = d[:n], d[n:]
         loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
-        m[loose] = SAFETY * _motion(st, ia[loose], ib[loose], p[loose], q[loose])
+        m[loose] = SAFETY * _in_batches(_motion, st, ia[loose], ib[loose], p[loose], q[loose])
         exact = (da + db - m) / 2 <= clearance
         k = int(exact.sum())
         d = _per_state(_distance, st, np.concatenate([ia[exact], ib[exact]]),
                        np.tile(p[exact], 2), np.tile(q[exact], 2))
         da[exact], db[exact] = d[:k], d[k:]
         for w_s, d_s in ((wa, da), (wb, db)):
-            hit = exact & (d_s <= clearance)
-            if hit.any() and w_s[hit].min() <= best:
-                w_hit = w_s[hit].min()
-                at = hit & (w_s == w_hit)
-                new = [geo.label(a, b) for a, b in zip(p[at], q[at])]
-                contact = sorted(set(new + (contact if w_hit == best else [])))
-                best = w_hit
+            found.record(w_s, exact & (d_s <= clearance), p, q)
         open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
-        rows = _split(rows[open_], st)
-        m = np.full(len(rows), np.inf)
-    if not np.isfinite(best):
-        return None, []
-    return sign * float(best) if best > 0 else 0.0, contact
+        if open_.any():
+            halves = _split(rows[open_], st)
+            stack.append((halves, np.full(len(halves), np.inf)))
 
 
 class _States:
@@ -435,7 +499,7 @@ class _States:
     """
 
     def __init__(self, geo: _Geometry, sign: float, omegas: np.ndarray):
-        self.geo, self.sign, self.omegas = geo, sign, []
+        self.geo, self.sign, self.omegas, self._at = geo, sign, [], {}
         self._T = np.zeros((0, _ROWS, geo.N * geo.M))
         self.add(omegas)
 
@@ -443,6 +507,16 @@ class _States:
     def T(self) -> np.ndarray:
         """The panel tables (K, 19, P) of the states so far (a contiguous view)."""
         return self._T[:len(self.omegas)]
+
+    def index(self, omegas: np.ndarray) -> np.ndarray:
+        """The states' indices (k,) at the |omega| values (k,), those not held yet folded
+        and added."""
+        new = [w for w in dict.fromkeys(np.asarray(omegas, dtype=float).tolist())
+               if w not in self._at]
+        if new:
+            self.add(np.array(new))
+        return np.array([self._at[w] for w in np.asarray(omegas, dtype=float).tolist()],
+                        dtype=np.int64)
 
     def add(self, omegas: np.ndarray) -> None:
         """Fold the pattern at the |omega| values (k,) and append those states."""
@@ -462,6 +536,7 @@ class _States:
                       u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
         T[:, 15:18] = n / np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)[:, None]
         T[:, 18] = self.geo.radius
+        self._at.update((w, K + i) for i, w in enumerate(omegas.tolist()))
         self.omegas.extend(omegas.tolist())
 
 
@@ -547,6 +622,13 @@ def _per_state(f, st: _States, s, p, q) -> np.ndarray:
     return np.concatenate(out or [np.zeros(0)])[inv]
 
 
+def _in_batches(f, st: _States, *index: np.ndarray) -> np.ndarray:
+    """f(st, *index) (n,) for the index arrays (all (n,)), in batches of ``BATCH``."""
+    n = len(index[0])
+    out = [f(st, *(x[k:k + BATCH] for x in index)) for k in range(0, n, BATCH)]
+    return np.concatenate(out or [np.zeros(0)])
+
+
 def _distinct(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions (u,) of one occurrence of each distinct value of ``code`` (n,) and the
     index (n,) of every entry's value among them (by sorting)."""
@@ -608,35 +690,30 @@ def _most_of(xs: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _coarse_rows(geo: _Geometry, st: _States, K: int,
-                 clearance: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (n, 4) = (state a, state b, p, q): for every step between the K coarse states
-    (the first K of ``st``), every pair that the sphere gaps g(a), g(b) and the rows'
-    motion bound m do not certify clear, (g(a) + g(b) - m) / 2 <= clearance; and those
-    bounds m (n,), SAFETY times the centres' relative displacement plus each panel's
-    largest vertex displacement about its centre (at least :func:`_motion`'s). One tree
-    per step, on the centres at its start, with the panels' reaches of :func:`_reach`."""
+def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
+    """The rows (n, 4) = (a, a + 1, p, q) of the coarse step from state a to a + 1 of
+    ``st``: every pair that the sphere gaps g(a), g(a + 1) and the rows' motion bound m do
+    not certify clear, (g(a) + g(a + 1) - m) / 2 <= clearance; with those bounds m (n,),
+    SAFETY times the centres' relative displacement plus each panel's largest vertex
+    displacement about its centre (at least :func:`_motion`'s). In chunks (rows, m) of at
+    most ROWS pairs, from the tree queries of :func:`_close_pairs` with the panels'
+    reaches of :func:`_reach`."""
+    Ta, Tb = st.T[a], st.T[a + 1]
     P = geo.N * geo.M
-    rows, bounds = [], []
-    for a, b in zip(range(K - 1), range(1, K)):
-        Ta, Tb = st.T[a], st.T[b]
-        C, D = Ta[12:15], Tb[12:15] - Ta[12:15]                      # (3, P)
-        dQ = (Tb[:12] - Ta[:12]).reshape(3, 4, P) - D[:, None]
-        spin = _most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
-        G = _reach(C, D, spin, geo.radius, clearance)
-        f32 = np.float32                 # the broad phase only; gaps - eps, bounds + eps
-        eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())   # are safe
-        X = np.concatenate([_table(geo, C.T, G, f32), Tb[12:15].astype(f32),
-                            spin[None].astype(f32)])                 # (11, P)
-        p, q, g0 = _near(geo, X, eps)
-        Y = X[[0, 1, 2, 3, 7, 8, 9, 10]]                             # C(a), r, C(b), spin
-        A, B = Y.take(p, axis=1, mode="clip"), Y.take(q, axis=1, mode="clip")
-        m = SAFETY * (_shift(A, B, 0, 4) + A[7] + B[7])
-        kept = np.flatnonzero((g0 + _gap(A, B, 4) - m) / 2 <= clearance + 2 * eps)
-        rows.append(np.stack([np.full(len(kept), a), np.full(len(kept), b), p[kept], q[kept]],
-                             axis=1))
-        bounds.append(m[kept].astype(float) + eps)
-    return np.concatenate(rows), np.concatenate(bounds)
+    C, D = Ta[12:15], Tb[12:15] - Ta[12:15]                          # (3, P)
+    dQ = (Tb[:12] - Ta[:12]).reshape(3, 4, P) - D[:, None]
+    spin = _most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
+    G = _reach(C, D, spin, geo.radius, clearance)
+    eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())
+    Y = np.concatenate([Tb[12:15], geo.radius[None], D, spin[None]])  # (8, P)
+    for p, q, dist in _close_pairs(geo, C.T, geo.radius + G, 2 * eps):
+        A, B = Y.take(p, axis=1), Y.take(q, axis=1)                  # (8, n)
+        m = SAFETY * (_shift(A, B, 4) + A[7] + B[7])
+        g0 = dist - A[3] - B[3]
+        kept = np.flatnonzero((g0 + _gap(A, B) - m) / 2 <= clearance + 2 * eps)
+        rows = np.stack([np.full(len(kept), a), np.full(len(kept), a + 1), p[kept], q[kept]],
+                        axis=1)
+        yield rows, m[kept] + eps
 
 
 def _reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
@@ -672,13 +749,10 @@ def _reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
 
 def _split(rows: np.ndarray, st: _States) -> np.ndarray:
     """Halve the steps of ``rows`` (n, 4): the child rows (2n, 4), the midpoint states
-    appended to ``st``."""
-    if not rows.size:
-        return rows
+    not yet in ``st`` added to it."""
     first, inv = _distinct(rows[:, 0] * len(st.omegas) + rows[:, 1])
     w = np.asarray(st.omegas)
-    mid = len(st.omegas) + inv
-    st.add((w[rows[first, 0]] + w[rows[first, 1]]) / 2)
+    mid = st.index((w[rows[first, 0]] + w[rows[first, 1]]) / 2)[inv]
     left = np.stack([rows[:, 0], mid, rows[:, 2], rows[:, 3]], axis=1)
     right = np.stack([mid, rows[:, 1], rows[:, 2], rows[:, 3]], axis=1)
     return np.concatenate([left, right])

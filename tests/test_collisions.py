@@ -11,7 +11,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
-from scipy.spatial import cKDTree
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model as nm
@@ -307,38 +306,26 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     assert np.mean(m < 0.5 * brute) > 0.1          # the panel frames do better for some
 
 
-class CountingTree(cKDTree):
-    """A k-d tree that counts the queries of the big panels apart (the split broad phase)."""
-    splits = 0
-
-    def sparse_distance_matrix(self, *args, **kwargs):
-        CountingTree.splits += 1
-        return super().sparse_distance_matrix(*args, **kwargs)
+def coarse_rows(geo: _Geometry, states: _States, K: int, clearance: float):
+    """The broad phase's rows (n, 4) and bounds (n,) of every step between the first K
+    states, its chunks put together."""
+    chunks = [c for a in range(K - 1) for c in _coarse_rows(geo, states, a, clearance)]
+    return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 
-@pytest.fixture
-def tree_splits(monkeypatch):
-    """The number of split broad-phase queries made under the test (a callable)."""
-    monkeypatch.setattr(collisions_module, "cKDTree", CountingTree)
-    CountingTree.splits = 0
-    return lambda: CountingTree.splits
-
-
-@pytest.mark.parametrize("seed, clearance, split", [(29, 0.0, False), (29, 0.05, False),
-                                                   (16, 0.0, True), (16, 0.05, True)])
-def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, split,
-                                                             tree_splits):
-    """The broad phase (one tree per coarse step with the panels' reaches, float32 tables;
-    with very unequal reaches the big ones queried apart) keeps every pair that a float64
-    scan of all pairs finds not cleared by its sphere gaps and motion bound over a coarse
-    step, however far apart, with a motion bound at least as large."""
+@pytest.mark.parametrize("seed, clearance", [(29, 0.0), (29, 0.05), (16, 0.0), (16, 0.05)])
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance):
+    """The broad phase (per coarse step, the panels' reaches, trees on blocks of panels by
+    decreasing reach) keeps every pair that a float64 scan of all pairs finds not cleared
+    by its sphere gaps and motion bound over a coarse step, however far apart, with a
+    motion bound at least as large, and each pair once a step."""
     pat = random_recipe(seed)
     geo = _Geometry(pat)
     K = 25
     states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
-    rows, m = _coarse_rows(geo, states, K, clearance)
-    assert (tree_splits() > 0) == split
+    rows, m = coarse_rows(geo, states, K, clearance)
     got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
+    assert len(got) == len(rows)
     p, q = np.triu_indices(pat.N * pat.M, 1)
     keep = non_adjacent(geo, p, q)
     p, q = p[keep], q[keep]
@@ -386,13 +373,10 @@ def perturbed_miura(seed: int) -> rq.Pattern:
     return nm.march(rq.perturb_angles(rq.miura_boundary(6, 6, alpha0=1.2), 0.02 * np.pi, seed))
 
 
-@pytest.mark.parametrize("make, seed, clearance, omega_max, split", [
-    (perturbed_miura, 0, 0.4, 3.0, False),      # similar panels: one tree query per step
-    (perturbed_miura, 1, 0.2, 3.0, False),
-    (random_recipe, 11, 0.03, 2.4, True),       # very unequal panels: big ones queried apart
-    (random_recipe, 16, 0.03, 2.4, True)])
-def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, omega_max, split,
-                                                       tree_splits):
+@pytest.mark.parametrize("make, seed, clearance, omega_max", [
+    (perturbed_miura, 0, 0.4, 3.0), (perturbed_miura, 1, 0.2, 3.0),     # similar panels
+    (random_recipe, 11, 0.03, 2.4), (random_recipe, 16, 0.03, 2.4)])    # very unequal
+def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, omega_max):
     """Ground truth for the whole broad phase (trees, reaches, sphere gaps, float32 slack,
     motion bounds): every pair sharing no vertex that an all-pairs scan finds within the
     clearance at some omega of a coarse step (5 samples a step, its ends included) is a
@@ -403,8 +387,7 @@ def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, om
     geo = _Geometry(pat)
     K = 4
     omegas = np.linspace(0.0, omega_max, K)
-    rows, _ = _coarse_rows(geo, _States(geo, 1.0, omegas), K, clearance)
-    assert (tree_splits() > 0) == split
+    rows, _ = coarse_rows(geo, _States(geo, 1.0, omegas), K, clearance)
     got = {(a, geo.label(p, q)) for a, _, p, q in rows.tolist()}
     found, first = 0, np.inf
     for k in range(K - 1):
@@ -416,3 +399,34 @@ def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, om
     assert found > 0
     rep = collisions(pat, omega_max, clearance=clearance)
     assert rep.first_omega is not None and rep.first_omega <= first
+
+
+@pytest.mark.parametrize("make, seed, clearance, omega_max", [
+    (random_recipe, 29, 0.003, 2.5), (random_recipe, 22, 0.0015, 3.0),
+    (perturbed_miura, 0, 0.4, 3.0)])
+def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance, omega_max,
+                                                          monkeypatch):
+    """With a small ROWS, every chunk of broad-phase rows and every batch the refinement
+    evaluates (two states per row) holds at most ROWS pairs, there are many of them, and
+    the report is the one of a single chunk."""
+    pat = make(seed)
+    whole = collisions(pat, omega_max, clearance=clearance)
+    chunks, batches = [], []
+    coarse, per_state = collisions_module._coarse_rows, collisions_module._per_state
+
+    def counted_rows(*args):
+        for rows, m in coarse(*args):
+            chunks.append(len(rows))
+            yield rows, m
+
+    def counted_per_state(f, st, s, p, q):
+        batches.append(len(s))
+        return per_state(f, st, s, p, q)
+
+    monkeypatch.setattr(collisions_module, "ROWS", 8)
+    monkeypatch.setattr(collisions_module, "_coarse_rows", counted_rows)
+    monkeypatch.setattr(collisions_module, "_per_state", counted_per_state)
+    chunked = collisions(pat, omega_max, clearance=clearance)
+    assert chunked == whole and not whole.free
+    assert max(chunks) <= 8 and max(batches) <= 2 * 8
+    assert len(chunks) > 3 * int(np.ceil(omega_max / collisions_module.MAX_STEP))
