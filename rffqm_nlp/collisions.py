@@ -243,10 +243,12 @@ def _kept(order: np.ndarray, R: np.ndarray, ij: np.ndarray, i: np.ndarray, j: np
     (P, 2) by rank) at distances ``dist`` (n,), those with j > i, at most R_i + R_j +
     ``slack`` apart and sharing no vertex, as (p, q, dist) with p < q, in chunks of at
     most ROWS."""
-    keep = np.flatnonzero((j > i) & (dist <= R[i] + R[j] + slack)
-                          & (np.maximum(np.abs(ij[i, 0] - ij[j, 0]),
-                                        np.abs(ij[i, 1] - ij[j, 1])) >= 2))
-    p, q, dist = order[i[keep]], order[j[keep]], dist[keep]
+    k = np.flatnonzero(j > i)                            # each test on the pairs left
+    i, j, dist = i[k], j[k], dist[k]
+    k = np.flatnonzero(dist <= R[i] + R[j] + slack)
+    i, j, dist = i[k], j[k], dist[k]
+    k = np.flatnonzero(np.maximum(np.abs(ij[i, 0] - ij[j, 0]), np.abs(ij[i, 1] - ij[j, 1])) >= 2)
+    p, q, dist = order[i[k]], order[j[k]], dist[k]
     for k in range(0, len(p), ROWS):
         a, b = p[k:k + ROWS], q[k:k + ROWS]
         yield np.minimum(a, b), np.maximum(a, b), dist[k:k + ROWS]

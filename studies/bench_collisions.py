@@ -11,6 +11,12 @@ times in one run
 and reports their ratio (the issue's goal: at most 2 at 100 x 100). A second table times
 ``collisions`` on the paper's Fig. Random recipe at 10 x 10 (Miura angles +-0.1 pi, the
 side-length LP; ``--lp-seeds``), whose very unequal side lengths made slow cases.
+``--solved N`` adds a third: the sphere cap (targets/sphere_cap.toml) solved once at
+N x N panels to 0.9% RMS/diameter (``stop_rms = 0.009``), ``collisions`` at its designed
+omega against one march-and-fold of 100 states of its boundary data.
+
+Every table also gives the check's peak memory: the ``tracemalloc`` peak of one more
+``collisions`` call (untimed; NumPy's arrays are traced), over what was held before it.
 
 Times are CPU seconds of this process (``time.process_time``), so other jobs on a shared
 machine do not count; each is the smallest of ``--repeat`` runs (both sides of a ratio
@@ -19,9 +25,9 @@ caches and memory).
 Results are printed and written as Markdown.
 
 Usage: ``python studies/bench_collisions.py [--sizes 20,100] [--omega 2.0]
-[--amplitude 0.001] [--lp-seeds 11,16,36] [--repeat 3]
+[--amplitude 0.001] [--lp-seeds 11,16,36] [--repeat 3] [--solved 100]
 [--out studies/results/bench_collisions.md]``; ``--smoke``: 4 x 4 panels, one LP seed,
-one run, output to a temporary folder.
+one run (``--solved`` at 4 x 4 if given), output to a temporary folder.
 """
 
 from __future__ import annotations
@@ -30,6 +36,8 @@ import argparse
 import os
 import tempfile
 import time
+import tracemalloc
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +51,8 @@ from rffqm_nlp.lengths import side_length_lp
 ROOT = Path(__file__).resolve().parent.parent
 DATE = "2026-12-01"
 COLUMNS = ("panels", "pattern", "omega*", "march+fold [s]", "collisions [s]", "ratio",
-           "free", "first_omega")
-LP_COLUMNS = ("seed", "omega*", "collisions [s]", "free", "first_omega")
+           "check peak [MB]", "free", "first_omega")
+LP_COLUMNS = ("seed", "omega*", "collisions [s]", "check peak [MB]", "free", "first_omega")
 
 
 def perturbed(n: int, amplitude: float) -> tuple[rq.BoundaryData, int]:
@@ -70,6 +78,16 @@ def cpu(f, repeat: int):
     return out, best
 
 
+def peak_mb(f) -> str:
+    """The tracemalloc peak of f() in MB, over what was traced before, for a table cell."""
+    tracemalloc.start()
+    try:
+        f()
+        return f"{tracemalloc.get_traced_memory()[1] / 1e6:.1f}"
+    finally:
+        tracemalloc.stop()
+
+
 def first(rep) -> str:
     """The report's first contact for a table cell."""
     return "-" if rep.first_omega is None else f"{rep.first_omega:.4f}"
@@ -87,7 +105,19 @@ def row(n: int, name: str, bd: rq.BoundaryData, omega: float, repeat: int) -> di
         t_col = min(t_col, t)
     return {"panels": f"{n} x {n}", "pattern": name, "omega*": f"{omega:g}",
             "march+fold [s]": f"{t_fold:.2f}", "collisions [s]": f"{t_col:.2f}",
-            "ratio": f"{t_col / t_fold:.1f}", "free": str(rep.free), "first_omega": first(rep)}
+            "ratio": f"{t_col / t_fold:.1f}",
+            "check peak [MB]": peak_mb(lambda: collisions(pat, omega)),
+            "free": str(rep.free), "first_omega": first(rep)}
+
+
+def solved(n: int) -> tuple[rq.BoundaryData, float]:
+    """The sphere cap solved at n x n panels to 0.9% RMS/diameter: its boundary data and
+    designed omega."""
+    problem, options = rq.load_design(ROOT / "targets" / "sphere_cap.toml")
+    res = replace(problem, panels=(n, n)).solve(options, stop_rms=0.009)
+    print(f"solved {n} x {n}: {res.stats.status}, rms {res.fit.rms:.4f}, "
+          f"omega {res.omega:.4f}", flush=True)
+    return res.boundary, float(res.omega)
 
 
 def lp_row(seed: int, omega: float, repeat: int) -> dict:
@@ -96,6 +126,7 @@ def lp_row(seed: int, omega: float, repeat: int) -> dict:
     pat = nm.march(side_length_lp(bd))
     rep, t_col = cpu(lambda: collisions(pat, omega), repeat)
     return {"seed": str(seed), "omega*": f"{omega:g}", "collisions [s]": f"{t_col:.2f}",
+            "check peak [MB]": peak_mb(lambda: collisions(pat, omega)),
             "free": str(rep.free), "first_omega": first(rep)}
 
 
@@ -113,6 +144,8 @@ def main() -> None:
     ap.add_argument("--amplitude", type=float, default=0.001, help="perturbation / pi")
     ap.add_argument("--lp-seeds", default="11,16,36")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--solved", type=int, default=None,
+                    help="also the sphere cap solved at this many panels a side")
     ap.add_argument("--out", type=Path, default=ROOT / "studies/results/bench_collisions.md")
     ap.add_argument("--smoke", action="store_true")
     args = ap.parse_args()
@@ -128,16 +161,28 @@ def main() -> None:
             rows.append(row(n, name, b, args.omega, repeat))
             print(table(rows[-1:], COLUMNS).splitlines()[-1], flush=True)
     lp = [lp_row(s, args.omega, repeat) for s in seeds]
+    solved_rows, solved_note, solved_cmd = [], "", ""
+    if args.solved:
+        n = 4 if args.smoke else args.solved
+        bd, omega = solved(n)
+        solved_rows = [row(n, "sphere cap, solved to 0.9%", bd, omega, repeat)]
+        solved_cmd = f" --solved {n}"
+        solved_note = ("\n\nThe sphere cap solved once at that size to 0.9% RMS/diameter "
+                       "(`stop_rms = 0.009`), at its designed omega*:\n\n"
+                       + table(solved_rows, COLUMNS))
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     text = (f"# Self-contact check against march-and-fold ({DATE})\n\n"
             f"`python studies/bench_collisions.py --sizes {','.join(map(str, sizes))} "
             f"--omega {args.omega:g} --amplitude {args.amplitude:g} --lp-seeds "
-            f"{','.join(map(str, seeds))} --repeat {repeat}`; CPU seconds of one process, "
+            f"{','.join(map(str, seeds))} --repeat {repeat}{solved_cmd}`; CPU seconds of one "
+            "process, "
             f"the smallest of {repeat} runs each (the two sides of a ratio alternated), on a "
             f"machine shared with other jobs (load average {load} at the end). march+fold: "
             "`fold(march(bd), linspace(0, omega*, "
-            "100))`; collisions: `collisions(pattern, omega*)` (clearance 0, tol 1e-4). "
-            "Goal (issue 20): ratio <= 2 at 100 x 100.\n\n" + table(rows, COLUMNS) + "\n\n"
+            "100))`; collisions: `collisions(pattern, omega*)` (clearance 0, tol 1e-4); check "
+            "peak: the tracemalloc peak of one more collisions call. "
+            "Goal (issue 20): ratio <= 2 at 100 x 100.\n\n" + table(rows, COLUMNS)
+            + solved_note + "\n\n"
             "The paper's Fig. Random recipe at 10 x 10 (Miura angles +-0.1 pi, side-length "
             "LP: side lengths over several orders of magnitude), `collisions(pattern, "
             "omega*)`:\n\n" + table(lp, LP_COLUMNS) + "\n")
