@@ -75,6 +75,10 @@ MAX_DAMPING = 1e10
 BLOCK = 1 << 24
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`)
 GRAM_ROWS = 1024
+#: design variables outside the march (S is zero there) from which :class:`_Window` keeps
+#: them out of its pool: fewer (the rigid alignment alone) cost less as zero columns than
+#: their own products per level
+FREE_COLUMNS = 64
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: statuses of a run that ended where it should
@@ -276,10 +280,14 @@ class _Window:
     Each state row gets a slot in a pool (``pool`` rows) from its level until the last
     level that uses it: the marching equations of a later level, or a residual row, which
     is reduced at the level of its latest state unknown (residual rows that use no state
-    come first). A slot freed is reused by a later level. Static: built once from the
-    sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in level order) has
-    data = 1 + the index of each nonzero in the residuals' Jacobian. ``pattern`` (state
-    rows) and ``weights`` are the metric's rows and their D."""
+    come first). A slot freed is reused by a later level. Only the design variables the
+    marching equations use (``marching``, n_m of them: the boundary data and omega) have
+    columns in the pool; S is zero in the others (``free``: the rigid alignment, a free
+    correspondence's grid), whose reduced Jacobian is J_d's sparse columns (when they are
+    :data:`FREE_COLUMNS` or more; fewer stay in the pool). Static: built
+    once from the sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in
+    level order) has data = 1 + the index of each nonzero in the residuals' Jacobian.
+    ``pattern`` (state rows) and ``weights`` are the metric's rows and their D."""
 
     def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
                  weights: np.ndarray):
@@ -302,28 +310,49 @@ class _Window:
         np.maximum.at(last, Jcoo.col[state] - n_d, at[Jcoo.row[state]])
         slot = self._slots(levels.bounds, last)
         self.pool = int(slot.max()) + 1 if n_s else 0
-        column = np.concatenate([np.arange(n_d), n_d + slot])  # design + state -> pool row
-        width = n_d + self.pool
+        self.marching = np.unique(W.indices[~uses])
+        self.free = np.setdiff1d(np.arange(n_d), self.marching)
+        if self.free.size < FREE_COLUMNS:  # kept in the pool, as columns of zeros
+            self.marching, self.free = np.arange(n_d), np.zeros(0, dtype=np.int64)
+        n_m = self.marching.size
+        column = np.full(n_d + n_s, -1, dtype=np.int64)  # -> pool row (-1: a free column)
+        column[self.marching] = np.arange(n_m)
+        column[n_d:] = n_m + slot
+        free_column = np.full(n_d, -1, dtype=np.int64)
+        free_column[self.free] = np.arange(self.free.size)
+        width = n_m + self.pool
+        self._J_free = _Sliced(J[:, self.free])  # the free columns' reduced Jacobian
         self._slot = slot
         self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
                         for lo, hi in levels.bounds]
         order = np.argsort(at, kind="stable")
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
-        self._residuals = {}  # level -> (rows, J's rows in pool columns, nonzeros' index)
+        self._residuals = {}  # level -> (rows, their pool and free parts, nonzeros' index)
         for k, lo, hi in zip(range(-1, len(levels.bounds)), bounds[:-1], bounds[1:]):
             if hi > lo:
                 rows = order[lo:hi]
-                block = J[rows]
-                index = block.data.astype(np.int64) - 1
-                block = sp.csr_matrix((np.zeros(block.nnz), column[block.indices],
-                                       block.indptr), shape=(rows.size, width))
-                self._residuals[k] = (rows, block, index)
+                self._residuals[k] = (rows, *self._split(J[rows], column, free_column, width))
         is_pattern = np.zeros(n_s, dtype=bool)
         is_pattern[pattern] = True
         root = np.zeros(n_s)
         root[pattern] = np.sqrt(weights)
         self._pattern = [(np.flatnonzero(is_pattern[lo:hi]), root[lo:hi][is_pattern[lo:hi]])
                          for lo, hi in levels.bounds]
+
+    def _split(self, block: sp.csr_matrix, column: np.ndarray, free_column: np.ndarray,
+               width: int) -> tuple:
+        """Residual rows (k, n_d + n_s) as (their part in the pool's columns, k x width;
+        its nonzeros' index in J; their free design columns, k x n_f; its index)."""
+        coo = block.tocoo()
+        index = block.data.astype(np.int64) - 1
+        pooled = column[coo.col] >= 0
+        parts = []
+        for keep, cols, n in ((pooled, column, width), (~pooled, free_column, self.free.size)):
+            part = sp.csr_matrix((np.zeros(keep.sum()), (coo.row[keep], cols[coo.col[keep]])),
+                                 shape=(block.shape[0], n))
+            order = np.lexsort((cols[coo.col[keep]], coo.row[keep]))  # CSR's order
+            parts += [part, index[keep][order]]
+        return tuple(parts)
 
     @staticmethod
     def _slots(bounds: list[tuple[int, int]], last: np.ndarray) -> np.ndarray:
@@ -344,32 +373,65 @@ class _Window:
         return slot
 
     def __call__(self, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """(J' J, J' r, S_p' D_p S_p) at the residuals' Jacobian nonzeros J and residuals
-        r (n_r,), with the levels refilled at the same point; None where they are not
-        finite."""
-        n_d = self.levels.n_d
-        pool = np.zeros((n_d + self.pool, n_d))  # [I; the working set of S]
-        pool[:n_d] = np.eye(n_d)
-        JtJ, M, grad = _Gram(n_d), _Gram(n_d), np.zeros(n_d)
-        self._reduce(-1, pool, J, r, JtJ, grad)
+        """(J' J, J' r, S_p' D_p S_p), in the design's order, at the residuals' Jacobian
+        nonzeros J and residuals r (n_r,), with the levels refilled at the same point;
+        None where they are not finite."""
+        n_m, n_f = self.marching.size, self.free.size
+        pool = np.zeros((n_m + self.pool, n_m))  # [I; the working set of S]
+        pool[:n_m] = np.eye(n_m)
+        sums = _Sums(n_m, n_f)
+        self._reduce(-1, pool, J, r, sums)
         for k, ((lo, hi), W, (mine, root)) in enumerate(zip(self.levels.bounds, self._blocks,
                                                             self._pattern)):
             S = W @ pool
-            pool[n_d + self._slot[lo:hi]] = S
-            M.add(S[mine] * root[:, None])
-            self._reduce(k, pool, J, r, JtJ, grad)
-        out = JtJ.total(), grad, M.total()
+            pool[n_m + self._slot[lo:hi]] = S
+            sums.metric.add(S[mine] * root[:, None])
+            self._reduce(k, pool, J, r, sums)
+        out = sums.total(self.marching, self.free, self._J_free(J), r)
         return out if all(np.all(np.isfinite(a)) for a in out) else None
 
     def _reduce(self, k: int, pool: np.ndarray, J: np.ndarray, r: np.ndarray,
-                JtJ: "_Gram", grad: np.ndarray) -> None:
-        """The residual rows reduced at level k added to J' J and J' r (in place)."""
+                sums: "_Sums") -> None:
+        """The residual rows reduced at level k added to the sums (in place)."""
         if k in self._residuals:
-            rows, block, index = self._residuals[k]
-            block.data[:] = J[index]
-            Jr = block @ pool
-            grad += Jr.T @ r[rows]
-            JtJ.add(Jr)
+            rows, pooled, index, free, free_index = self._residuals[k]
+            pooled.data[:] = J[index]
+            free.data[:] = J[free_index]
+            sums.add(pooled @ pool, free, r[rows])
+
+
+class _Sums:
+    """The sums of one pass over the levels: over the marching columns (n_m) the Gram
+    matrices of the reduced Jacobian's rows and of the metric's, J_m' r, and J_m' J_f
+    with the free columns (n_f)."""
+
+    def __init__(self, n_m: int, n_f: int):
+        self.jacobian, self.metric = _Gram(n_m), _Gram(n_m)
+        self.cross = np.zeros((n_f, n_m))  # Jf' Jm
+        self.grad = np.zeros(n_m)
+
+    def add(self, Jm: np.ndarray, Jf: sp.csr_matrix, r: np.ndarray) -> None:
+        """Residual rows: their reduced Jacobian in the marching columns Jm (k, n_m), in
+        the free ones Jf (k, n_f, sparse), their values r (k,)."""
+        self.jacobian.add(Jm)
+        self.grad += Jm.T @ r
+        if Jf.nnz:
+            self.cross += Jf.T @ Jm
+
+    def total(self, marching: np.ndarray, free: np.ndarray, Jf: sp.csr_matrix,
+              r: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f); ``Jf``
+        (n_r, n_f): the residuals' Jacobian in the free columns, their reduced Jacobian
+        (S is zero there); ``r`` (n_r,) the residuals."""
+        n = marching.size + free.size
+        JtJ, grad, M = np.zeros((n, n)), np.zeros(n), np.zeros((n, n))
+        JtJ[np.ix_(marching, marching)] = self.jacobian.total()
+        JtJ[np.ix_(free, marching)] = self.cross
+        JtJ[np.ix_(marching, free)] = self.cross.T
+        JtJ[np.ix_(free, free)] = (Jf.T @ Jf).toarray()
+        grad[marching], grad[free] = self.grad, Jf.T @ r
+        M[np.ix_(marching, marching)] = self.metric.total()
+        return JtJ, grad, M
 
 
 class _Gram:

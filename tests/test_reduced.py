@@ -92,6 +92,22 @@ def test_the_level_pass_and_the_sweeps_match_the_dense_sensitivity(manifold, see
     products of the whole S (the forward sweep of the identity, checked against finite
     differences above) to round-off; the working set is a part of the state."""
     _, man = manifold
+    assert man._window.free.size == 0  # the rigid alignment stays in the pool
+    _assert_level_pass_matches_dense(man, seed)
+
+
+def test_the_level_pass_with_free_columns_matches_the_dense_sensitivity(monkeypatch):
+    """The same with the design variables outside the march (here the rigid alignment)
+    kept out of the pool, as a free correspondence's grid is."""
+    monkeypatch.setattr(reduced, "FREE_COLUMNS", 1)
+    prob, _ = small("sphere_cap")
+    man = reduced.Manifold(prob.transcribe())
+    assert man._window.free.size == 7  # the quaternion and the translation
+    for seed in (0, 1):
+        _assert_level_pass_matches_dense(man, seed)
+
+
+def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     nlp, rng = man.nlp, np.random.default_rng(seed)
     x = nlp.x0.copy()
     x[man.design] += 1e-3 * rng.standard_normal(man.design.size)
