@@ -313,16 +313,25 @@ def coarse_rows(geo: _Geometry, states: _States, K: int, clearance: float):
     return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 
-@pytest.mark.parametrize("seed, clearance", [(29, 0.0), (29, 0.05), (16, 0.0), (16, 0.05)])
-def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance):
-    """The broad phase (per coarse step, the panels' reaches, trees on blocks of panels by
-    decreasing reach) keeps every pair that a float64 scan of all pairs finds not cleared
-    by its sphere gaps and motion bound over a coarse step, however far apart, with a
-    motion bound at least as large, and each pair once a step."""
+@pytest.mark.parametrize("seed, clearance, rows_at_once", [
+    (29, 0.0, None), (29, 0.05, None), (16, 0.0, None), (16, 0.05, None),   # one query a step
+    (29, 0.0, 64), (16, 0.05, 64)])                                         # blocks by reach
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, rows_at_once,
+                                                             monkeypatch):
+    """The broad phase (per coarse step, the panels' reaches; one tree query, or with few
+    pairs allowed at once, blocks of panels by decreasing reach queried against the
+    panels from the block on) keeps every pair that a float64 scan of all pairs finds not
+    cleared by its sphere gaps and motion bound over a coarse step, however far apart,
+    with a motion bound at least as large, and each pair once a step."""
     pat = random_recipe(seed)
     geo = _Geometry(pat)
     K = 25
     states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
+    if rows_at_once:
+        monkeypatch.setattr(collisions_module, "ROWS", rows_at_once)
+        chunks = [len(r) for a in range(K - 1)
+                  for r, _ in collisions_module._coarse_rows(geo, states, a, clearance)]
+        assert len(chunks) > 2 * (K - 1) and max(chunks) <= rows_at_once
     rows, m = coarse_rows(geo, states, K, clearance)
     got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
     assert len(got) == len(rows)
