@@ -101,6 +101,11 @@ BATCH = 2048
 #: grows like the pattern, not like its pairs.
 ROWS = 2 ** 18
 
+#: The broad phase takes the panels in the grid's order (blocks of nearby panels) when
+#: their largest radius plus reach is at most this times the smallest, else by decreasing
+#: radius plus reach (blocks of big panels queried with a big radius, the rest small).
+SPREAD = 1.5
+
 #: Triangle pairs per vectorised batch of the narrow phase (bounds its memory).
 CHUNK = 4096
 
@@ -210,18 +215,20 @@ def _close_pairs(geo: _Geometry, C: np.ndarray, R: np.ndarray, slack: float):
     larger R: a block of panels queried (a tree of its own) against a tree on the panels
     from the block on, with twice the block's largest R, each block sized from the pairs
     per panel of the last query for 0.7 ROWS (the query radius only shrinks)."""
-    order = np.argsort(-R, kind="stable")
+    order = (np.arange(len(R)) if R.max() <= SPREAD * R.min()
+             else np.argsort(-R, kind="stable"))
     X, R, ij = C[order], R[order], geo.ij[order]
+    top = np.maximum.accumulate(R[::-1])[::-1]          # the largest R from each on
     P, c0, base, size = len(X), 0, 0, 64
     rest = cKDTree(X)
     while True:
         head = cKDTree(X[:size])
-        found = head.count_neighbors(rest, 2 * float(R[0]) + slack)
+        found = head.count_neighbors(rest, 2 * float(top[0]) + slack)
         if size == 1 or found <= ROWS:
             break
         size //= 2
     if found * P / min(size, P) <= 1.4 * ROWS:   # ordered pairs, self included: one query
-        i, j = rest.query_pairs(2 * float(R[0]) + slack, output_type="ndarray").T
+        i, j = rest.query_pairs(2 * float(top[0]) + slack, output_type="ndarray").T
         yield from _kept(order, R, ij, i, j, _norm(X[i] - X[j]), slack)
         return
     while c0 < P:
@@ -229,7 +236,8 @@ def _close_pairs(geo: _Geometry, C: np.ndarray, R: np.ndarray, slack: float):
             base, rest = c0, cKDTree(X[c0:])
         c1 = min(P, c0 + size)
         head = cKDTree(X[c0:c1])
-        hits = head.sparse_distance_matrix(rest, 2 * float(R[c0]) + slack, output_type="ndarray")
+        hits = head.sparse_distance_matrix(rest, float(R[c0:c1].max() + top[c0]) + slack,
+                                           output_type="ndarray")
         i, j, dist = hits["i"] + c0, hits["j"] + base, hits["v"]
         size = max(1, int(0.7 * (c1 - c0) * ROWS / max(len(hits), 1)))
         del hits

@@ -313,17 +313,19 @@ def coarse_rows(geo: _Geometry, states: _States, K: int, clearance: float):
     return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 
-@pytest.mark.parametrize("seed, clearance, rows_at_once", [
-    (29, 0.0, None), (29, 0.05, None), (16, 0.0, None), (16, 0.05, None),   # one query a step
-    (29, 0.0, 64), (16, 0.05, 64)])                                         # blocks by reach
-def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(seed, clearance, rows_at_once,
-                                                             monkeypatch):
+@pytest.mark.parametrize("make, seed, clearance, rows_at_once", [
+    ("random", 29, 0.0, None), ("random", 29, 0.05, None),                  # one query a step
+    ("random", 16, 0.0, None), ("random", 16, 0.05, None),
+    ("random", 29, 0.0, 64), ("random", 16, 0.05, 64),       # blocks by decreasing reach
+    ("miura", 0, 0.2, 64)])                                  # blocks in the grid's order
+def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(make, seed, clearance,
+                                                             rows_at_once, monkeypatch):
     """The broad phase (per coarse step, the panels' reaches; one tree query, or with few
-    pairs allowed at once, blocks of panels by decreasing reach queried against the
-    panels from the block on) keeps every pair that a float64 scan of all pairs finds not
-    cleared by its sphere gaps and motion bound over a coarse step, however far apart,
-    with a motion bound at least as large, and each pair once a step."""
-    pat = random_recipe(seed)
+    pairs allowed at once, blocks of panels queried against the panels from the block
+    on) keeps every pair that a float64 scan of all pairs finds not cleared by its sphere
+    gaps and motion bound over a coarse step, however far apart, with a motion bound at
+    least as large, and each pair once a step."""
+    pat = {"random": random_recipe, "miura": perturbed_miura}[make](seed)
     geo = _Geometry(pat)
     K = 25
     states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
