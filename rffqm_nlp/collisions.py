@@ -25,9 +25,10 @@ Method.
   |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, so every such pair has g(w0) <= G_p + G_q
   with a reach per panel G_p = (clearance + (SAFETY + 1) (L r_p + |e_p|) + SAFETY s_p) /
   (2 - (SAFETY + 1) L) (r its radius, s its spin: its largest vertex displacement about
-  its centre); the tree queries find the centres within r_p + G_p + r_q + G_q (panels by
-  decreasing r + G, blocks of them queried against the panels from the block on, so that
-  very unequal reaches do not make every query large). A folding sheet's centres move
+  its centre); the tree queries find the centres within r_p + G_p + r_q + G_q (blocks of
+  panels queried against the panels from the block on: in the grid's order when r + G is
+  nearly the same for all, else by decreasing r + G, so that very unequal reaches do not
+  make every query large). A folding sheet's centres move
   nearly affinely over a short step, so the reaches are a fraction of a panel. Every gap
   is lowered, every bound raised, by a small slack (a bound on the rounding).
 * Memory: no step's pairs are held at once. The tree queries give their pairs in chunks
