@@ -1,6 +1,7 @@
 """What the studies share: the bundled target problems, one design solved in a child process
-(its time and peak memory its own), an earlier revision's package, the machine/date line of the tables, the table cell
-formatter, writing and printing a table, and the ``--smoke`` run (tiny sizes, output to a temporary folder).
+(its time and peak memory its own), an earlier revision's package, the machine/date line of
+the tables, the table cell formatter, writing and printing a table, and the ``--smoke`` run
+(tiny sizes, output to a temporary folder).
 
 A study imports it as ``from common import ...`` (the studies folder is the script's path).
 ``python studies/common.py --child '<json>'`` solves one design and prints its row as JSON
