@@ -746,8 +746,9 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2 (the
     build's peak and the working set added, though they do not coincide: an upper
     estimate), for n_d = 3 (P + Q) design variables plus the 2 (P/2 + 1) (Q/2 + 1) grid
-    variables of a free correspondence (an extrapolation, not measured); IPOPT MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q
-    (plus MEMORY_SEQUENTIAL_BUILD for the sequential transcription)."""
+    variables of a free correspondence (an extrapolation, not measured); IPOPT needs
+    MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
+    the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
     if options.solver == LM:

@@ -10,7 +10,8 @@ refused, not run. The table gives the log-log slopes of wall time and of peak me
 between consecutive sizes, against the number of panels n^2.
 
     python studies/scale.py [--sizes 20 40 100 200] [--previous REV --previous-sizes 20 40 100]
-        [--target sphere_cap] [--stop-rms 0.009] [--time-limit 3600] [--out studies/results/scale.md]
+        [--target sphere_cap] [--stop-rms 0.009] [--time-limit 3600]
+        [--out studies/results/scale.md]
     python studies/scale.py --smoke   (4 and 8 panels, temporary output)
 """
 
