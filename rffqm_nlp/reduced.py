@@ -75,9 +75,9 @@ MAX_DAMPING = 1e10
 BLOCK = 1 << 24
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`)
 GRAM_ROWS = 1024
-#: design variables outside the march (S is zero there) from which :class:`_Window` keeps
-#: them out of its pool: fewer (the rigid alignment alone) cost less as zero columns than
-#: their own products per level
+#: how many design variables outside the march (S is zero there) :class:`_Window` keeps
+#: out of its pool: fewer (the rigid alignment alone) cost less as columns of zeros than
+#: with their own products at every level
 FREE_COLUMNS = 64
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
@@ -284,9 +284,9 @@ class _Window:
     marching equations use (``marching``, n_m of them: the boundary data and omega) have
     columns in the pool; S is zero in the others (``free``: the rigid alignment, a free
     correspondence's grid), whose reduced Jacobian is J_d's sparse columns (when they are
-    :data:`FREE_COLUMNS` or more; fewer stay in the pool). Static: built
-    once from the sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in
-    level order) has data = 1 + the index of each nonzero in the residuals' Jacobian.
+    :data:`FREE_COLUMNS` or more; fewer stay in the pool). Static: built once from the
+    sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in level order) has
+    data = 1 + the index of each nonzero in the residuals' Jacobian.
     ``pattern`` (state rows) and ``weights`` are the metric's rows and their D."""
 
     def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
