@@ -25,18 +25,20 @@ from pathlib import Path
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, export_package, fmt,
                     smoke_dir, solve_in_child, target_problem, write_table)
 from rffqm_nlp import design
+from rffqm_nlp.errors import InputError, one_line
 
 
 def run(target: str, n: int, stop_rms: float, time_limit: float,
         package: Path | None) -> dict:
     """One solve in a fresh process (``package``: the exported code of an earlier
-    revision, None for this one); refused without running when the memory estimate of
-    this revision's code exceeds what the machine has."""
-    problem, options = target_problem(target, n)
-    need, have = design.memory_estimate(problem, options), design.available_memory()
-    if package is None and have is not None and need > have:
-        return {"n": n, "status": f"refused: needs {need / 1e9:.1f} GB, {have / 1e9:.1f} "
-                                  "available", "wall": None, "peak_rss_mb": None}
+    revision, None for this one); refused without running when this revision's
+    :func:`rffqm_nlp.design.check_memory` refuses it."""
+    if package is None:
+        try:
+            design.check_memory(*target_problem(target, n))
+        except InputError as exc:
+            return {"n": n, "status": f"refused: {one_line(exc)}", "wall": None,
+                    "peak_rss_mb": None}
     env = None if package is None else {"PYTHONPATH": str(package)}
     return solve_in_child(target, n, solve={"stop_rms": stop_rms, "time_limit": time_limit},
                           env=env)
