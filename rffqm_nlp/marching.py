@@ -201,7 +201,7 @@ def _cumulative_qprod(first, steps, count: int, width: int):
     return ca.horzcat(first, acc(first, steps))
 
 
-def _rotate_planar(q, vx_, vy_):
+def rotate_planar(q, vx_, vy_):
     """Rotate in-plane vectors (vx, vy, 0) by unit quaternions q = (w, x, y, z), elementwise."""
     w, x, y, z = q
     return ((1 - 2 * (y * y + z * z)) * vx_ + 2 * (x * y - w * z) * vy_,
@@ -269,10 +269,10 @@ def rotated_edges(quat: Quaternion, alpha: ca.MX, theta_h: ca.MX, lh: ca.MX,
     """
     M = lh.shape[1]
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
-    bottom = _rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
+    bottom = rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
                             lh[0, :] * ca.sin(theta_h[0, :M]))
     quat_v = [ca.horzcat(comp, comp[:, M - 1]) for comp in quat]
-    vertical = _rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
+    vertical = rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
     return bottom, vertical
 
 

@@ -473,12 +473,13 @@ class Manifold:
     """The simultaneous NLP split into its design and its marched state.
 
     Built once per NLP: the index sets (``state`` in the order of the levels of the
-    marching equations), the levels, and the CasADi Functions of the residuals and
-    constraints (trial points) and of their Jacobians (accepted points).
+    marching equations), the levels, the CasADi Functions of the residuals and
+    constraints (trial points) and of the residuals' Jacobian, and the constraints' Jacobian
+    from local stencils (``nlp.g_jacobian``; accepted points).
     """
 
     def __init__(self, nlp: NLP):
-        if nlp.project is None or nlp.design_index is None:
+        if nlp.project is None or nlp.design_index is None or nlp.g_jacobian is None:
             raise InputError("solver='levenberg-marquardt' needs the simultaneous transcription")
         self.nlp = nlp
         n = nlp.x.numel()
@@ -494,9 +495,9 @@ class Manifold:
             raise RuntimeError(f"{self.eq.size} marching equations for {self.state.size} "
                                "state variables")
         self._values = _Buffered(ca.Function("values", [nlp.x], [nlp.residuals, nlp.g]))
-        self._jacobians = _Buffered(ca.Function(
-            "jacobians", [nlp.x],
-            [ca.jacobian(nlp.residuals, nlp.x), ca.jacobian(nlp.g, nlp.x)]))
+        self._jacobian_r = _Buffered(ca.Function("jacobian_r", [nlp.x],
+                                                 [ca.jacobian(nlp.residuals, nlp.x)]))
+        self._jacobian_g = nlp.g_jacobian
         self._order_by_level()
         where = np.full(n, -1)
         where[self.state] = np.arange(self.state.size)
@@ -517,7 +518,7 @@ class Manifold:
         """The matching of marching equations to state unknowns (``match``), their levels
         (:meth:`_levels`), and the state reordered by level: the unknowns of each level
         contiguous, in the order of its equations."""
-        Cs = self._jacobians.pattern(1).tocsr()[self.eq][:, self.state].tocsr()
+        Cs = self._jacobian_g.pattern().tocsr()[self.eq][:, self.state].tocsr()
         match = maximum_bipartite_matching(Cs, perm_type="column")
         if np.any(match < 0):
             raise RuntimeError("the marching equations are structurally singular in the state")
@@ -536,8 +537,8 @@ class Manifold:
     def _slice_jacobians(self) -> None:
         """The fixed blocks of J and G, the marching equations by level (:class:`_Levels`)
         and the pass that reduces J and the metric through them (:class:`_Window`)."""
-        J = self._jacobians.pattern(0).tocsr()
-        G = self._jacobians.pattern(1).tocsr()
+        J = self._jacobian_r.pattern(0).tocsr()
+        G = self._jacobian_g.pattern().tocsr()
         self._J_design = _Sliced(J[:, self.design])
         self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]
@@ -591,7 +592,7 @@ class Manifold:
     def linearize(self, p: _Point) -> _Linearization | None:
         """The derivatives at p; None where they are not finite or the marching equations
         no longer determine their unknowns. Invalidates the last point's."""
-        J, G = self._jacobians(p.x)
+        (J,), (G,) = self._jacobian_r(p.x), self._jacobian_g(p.x)
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
             return None
         if not self._sweeps.refill(G):

@@ -22,14 +22,14 @@ from collections.abc import Callable, Sequence
 import casadi as ca
 import numpy as np
 
-from . import numpy_model, shape
+from . import numpy_model, shape, stencils
 from . import vertex as vx
 from .backend import Scalar
 from .boundary import BoundaryData
 from .errors import InputError, MarchingError
 from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
                        fold_function, folded_function, panel_cell, panel_quaternions_function,
-                       pattern_function, qmul, rotated_edges)
+                       pattern_function, qmul, rotate_planar, rotated_edges)
 
 PI = np.pi
 
@@ -68,6 +68,9 @@ class NLP:
     free_target: ca.Function | None = None
     #: indices in x of that correspondence's grid, U then V (each column-major)
     grid_index: np.ndarray | None = None
+    #: g's Jacobian from local stencils (:mod:`rffqm_nlp.stencils`), for
+    #: :mod:`rffqm_nlp.reduced`; None: only CasADi's Jacobian of g
+    g_jacobian: stencils.LocalJacobian | None = None
 
     @property
     def objective(self) -> ca.MX:
@@ -89,7 +92,13 @@ class NLP:
         """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
         appended to g (e.g. :func:`rffqm_nlp.clearance.constrain`'s); with lower < upper
         they are inequalities, which :mod:`rffqm_nlp.reduced` linearises like the others."""
-        return replace(self, g=ca.vertcat(self.g, rows),
+        jacobian = self.g_jacobian
+        if jacobian is not None:
+            n_g, n = self.g.numel(), self.x.numel()
+            jacobian = jacobian.with_stencil(stencils.stencil(
+                ca.Function("rows", [self.x, ca.MX.sym("p", 0)], [rows]),
+                np.arange(n)[None, :], n_g + np.arange(rows.numel())[None, :]))
+        return replace(self, g=ca.vertcat(self.g, rows), g_jacobian=jacobian,
                        lbg=np.concatenate([self.lbg, np.asarray(lower, dtype=float)]),
                        ubg=np.concatenate([self.ubg, np.asarray(upper, dtype=float)]))
 
@@ -755,7 +764,164 @@ def simultaneous(setup: Setup) -> NLP:
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
                damping_weights=weights, design_index=design,
                pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
-               grid_index=None if corr is None else grid_index)
+               grid_index=None if corr is None else grid_index,
+               g_jacobian=_constraint_jacobian(setup, lay, start.sigma, tree, g.numel()))
+
+
+def _constraint_jacobian(setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _MeanTree,
+                         n_g: int) -> stencils.LocalJacobian:
+    """The Jacobian of :func:`simultaneous`'s constraints g (n_g rows, in its order),
+    assembled from one stencil per kind of row: the same equations on a panel's or a
+    vertex's own variables (:mod:`rffqm_nlp.stencils`)."""
+    N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+    kh0, _ = _fold_multipliers_kv(sigma)
+    out, const, at = [], [], [0]
+
+    def ix(name, i, j=0):
+        """Indices in x of block ``name`` at (i, j) (broadcast)."""
+        return lay.slices[name].start + np.asarray(i) + lay.shapes[name][0] * np.asarray(j)
+
+    def rows(*shape):
+        """The next rows of g: one column-major block per shape, as (block, ...)."""
+        blocks = []
+        for s in shape:
+            blocks.append(at[0] + np.arange(np.prod(s)).reshape(s, order="F"))
+            at[0] += blocks[-1].size
+        return blocks
+
+    def sx(name, k):
+        return [ca.SX.sym(f"{name}{c}") for c in range(k)]
+
+    def add(name, z, p, expr, columns, rows_, params=()):
+        f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
+                        [ca.vertcat(*expr)])
+        out.append(stencils.repeated(f, columns, rows_, list(params)))
+
+    grid = lambda n, m: np.meshgrid(np.arange(n), np.arange(m), indexing="ij")  # noqa: E731
+    i, j = grid(N, M)
+    S = sigma
+    quat = ("Qw", "Qx", "Qy", "Qz")
+    Ys = ("Yx", "Yy", "Yz")
+    # The panel cell (eq:marchingSector .. eq:getSides): vertex d, its sides, mu_abc.
+    march = rows((4, N, M))[0]
+    z = sx("z", 12)
+    a00, b00, a10, b10, a01, b01, a11, b11, lv0, lv1, lh0, lh1 = z
+    p = sx("p", 4)
+    xs, ys = panel_cell()(ca.vertcat(a10, b10, p[0], lv0),
+                          ca.vertcat(a00, b00, p[1], a01, b01, p[2], lh0))
+    side = vx.panel_side_residuals(a00, PI - b10, b01, lv0, lh0, lv1, lh1)
+    cell_z, cell_p = z, p
+    cell_expr = [a11 - xs[0], b11 - xs[1], *side, p[3] * (ys[1] ** 2 - 1)]
+    cell_columns = [ix("A", i, j), ix("B", i, j), ix("A", i + 1, j), ix("B", i + 1, j),
+                    ix("A", i, j + 1), ix("B", i, j + 1), ix("A", i + 1, j + 1),
+                    ix("B", i + 1, j + 1), ix("LV", i, j), ix("LV", i, j + 1),
+                    ix("LH", i, j), ix("LH", i + 1, j)]
+    cell_params = [S[1:, :M], S[:N, :M], S[:N, 1:],
+                   np.where(setup.mu_outside, 1.0, -1.0).reshape(N, M, order="F")]
+    # Edge directions (linear).
+    th0, th = rows((N,), (N + 1, M))
+    z = sx("z", 4)
+    add("theta_left", z, [], [z[0] - z[1] - (z[2] - z[3])],
+        [ix("TH", np.arange(1, N + 1)), ix("TH", np.arange(N)), ix("A", np.arange(N)),
+         ix("B", np.arange(1, N + 1))], [th0])
+    ii, jj = grid(N + 1, M)
+    add("theta", z, [], [z[0] - z[1] - (PI - z[2] - z[3])],
+        [ix("TH", ii, jj + 1), ix("TH", ii, jj), ix("A", ii, jj + 1), ix("B", ii, jj + 1)],
+        [th])
+    # Lifted fold multipliers (see _local_crease_quaternions).
+    phi0, phi = rows((M,), (N - 2, M))
+    z, p = sx("z", 3), sx("p", 2)
+    num, den = vx.mu2_terms(z[1], z[2], p[0])
+    cols = np.arange(M)
+    add("phi_bottom", z, p, [ca.sin(z[0]) * num + p[1] * ca.cos(z[0]) * den],
+        [ix("PHI", 0, cols), ix("A", 0, cols), ix("B", 0, cols)], [phi0],
+        [S[0, :M], S[1, :M] * kh0[:M]])
+    ii, jj = grid(N - 2, M)
+    z, p = sx("z", 2), sx("p", 1)
+    add("phi", z, p, [z[0] - p[0] * z[1]], [ix("PHI", ii + 1, jj), ix("PHI", ii, jj)],
+        [phi], [S[2:N, :M]])
+    # Panel rotations (eq:defGrads): the bottom row, then up the columns.
+    q0, q = rows((M - 1, 4), (N - 1, M, 4))
+    z, p = sx("z", 12), sx("p", 2)
+    omega = z[11]
+    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
+    num, den = vx.mu2_terms(z[9], z[10], p[0])
+    qv = crease_quaternion(z[8] + z[9], -p[1] * den, c, s, sign=-1.0, k_den=num)
+    prod = qmul(z[4:8], qv)
+    cols = np.arange(1, M)
+    add("rotation_bottom", z, p, [z[k] - prod[k] for k in range(4)],
+        [*(ix(n, 0, cols) for n in quat), *(ix(n, 0, cols - 1) for n in quat),
+         ix("TH", 0, cols), ix("A", 0, cols), ix("B", 0, cols),
+         np.full(M - 1, lay.slices["omega"].start)], [q0[:, k] for k in range(4)],
+        [S[0, 1:M], kh0[1:M]])
+    z, p = sx("z", 13), sx("p", 1)
+    omega = z[12]
+    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
+    num, den = vx.mu2_terms(z[10], z[11], p[0])
+    qh = crease_quaternion(z[8], -ca.sin(z[9]) * num, c, s, k_den=ca.cos(z[9]) * den)
+    prod = qmul(z[4:8], qh)
+    ii, jj = grid(N - 1, M)
+    add("rotation", z, p, [z[k] - prod[k] for k in range(4)],
+        [*(ix(n, ii + 1, jj) for n in quat), *(ix(n, ii, jj) for n in quat),
+         ix("TH", ii + 1, jj), ix("PHI", ii, jj), ix("A", ii + 1, jj), ix("B", ii + 1, jj),
+         np.full(ii.shape, lay.slices["omega"].start)], [q[..., k] for k in range(4)],
+        [S[1:N, :M]])
+    # Folded vertices (eq:finalCalc): rotated edges, the bottom row, then up the columns.
+    y0, y = rows((M, 3), (N, M + 1, 3))
+    z = sx("z", 12)
+    edge = rotate_planar(z[6:10], z[10] * ca.cos(z[11]), z[10] * ca.sin(z[11]))
+    cols = np.arange(M)
+    add("vertex_bottom", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
+        [*(ix(n, 0, cols + 1) for n in Ys), *(ix(n, 0, cols) for n in Ys),
+         *(ix(n, 0, cols) for n in quat), ix("LH", 0, cols), ix("TH", 0, cols)],
+        [y0[:, k] for k in range(3)])
+    z = sx("z", 13)
+    edge = rotate_planar(z[6:10], z[10] * ca.cos(z[11] + z[12]), z[10] * ca.sin(z[11] + z[12]))
+    ii, jj = grid(N, M + 1)
+    panel = np.minimum(jj, M - 1)  # the last column's edges turn with the panel on its left
+    add("vertex", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
+        [*(ix(n, ii + 1, jj) for n in Ys), *(ix(n, ii, jj) for n in Ys),
+         *(ix(n, ii, panel) for n in quat), ix("LV", ii, jj), ix("TH", ii, jj),
+         ix("A", ii, jj)], [y[..., k] for k in range(3)])
+    # Partial means (linear).
+    sides = np.concatenate([ix("LH", *grid(N + 1, M)).ravel("F"),
+                            ix("LV", *grid(N, M + 1)).ravel("F")])
+    below, k = sides, lay.slices["P"].start
+    for W, r in zip(tree.levels, rows(*((W.size1(),) for W in tree.levels))):
+        node = np.arange(k, k + W.size1())
+        w = W.sparse().tocoo()
+        wr, wc, wv = w.row, w.col, w.data
+        const.append(stencils.Constant(np.concatenate([r, r[wr]]),
+                                       np.concatenate([node, below[wc]]),
+                                       np.concatenate([np.ones(r.size), -wv])))
+        below, k = node, k + W.size1()
+    root = k - 1
+    # The panel cell's rows, and its multiplier's margin sign * (mu^2 - 1) further down.
+    add("cell", cell_z, cell_p, cell_expr, cell_columns, [*march, *rows((N, M))],
+        cell_params)
+    # The boundary MV assignment, on the boundary vertices' angles.
+    nv = N + 1 + M
+    left, bottom = (np.arange(N + 1), np.zeros(N + 1, int)), (np.zeros(M, int), np.arange(1, M + 1))
+    angles = [np.concatenate([ix(n, *left), ix(n, *bottom)]) for n in ("A", "B")]
+    a, b = ca.SX.sym("a", nv), ca.SX.sym("b", nv)
+    mv, _, _ = setup.boundary_mv(a, b)
+    out.append(stencils.stencil(ca.Function("mv", [ca.vertcat(a, b), ca.SX.sym("p", 0)], [mv]),
+                                np.concatenate(angles)[None, :], rows((nv,))[0][None, :]))
+    # Sides against the mean side (linear).
+    r = rows((sides.size,))[0]
+    const.append(stencils.Constant(np.concatenate([r, r]),
+                                   np.concatenate([sides, np.full(r.size, root)]),
+                                   np.concatenate([np.ones(r.size),
+                                                   np.full(r.size, -setup.min_length)])))
+    corr = setup.correspondence
+    if corr is not None:  # the grid rows of the free correspondence, on the grid
+        U, V = (ca.SX.sym(n, *corr.U0.shape) for n in ("U", "V"))
+        g, _, _ = corr.rows(U, V)
+        out.append(stencils.stencil(
+            ca.Function("grid", [ca.vertcat(ca.vec(U), ca.vec(V)), ca.SX.sym("p", 0)], [g]),
+            np.concatenate([np.arange(lay.slices[n].start, lay.slices[n].stop)
+                            for n in ("U", "V")])[None, :], rows((g.numel(),))[0][None, :]))
+    return stencils.LocalJacobian(out, const, (n_g, lay.size))
 
 
 def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):

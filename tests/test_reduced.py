@@ -37,7 +37,7 @@ def test_marching_equations_are_ordered_in_levels(manifold):
     """Every equation uses, besides its own unknown, only unknowns of equations of lower
     levels, and its own unknown's coefficient does not vanish."""
     _, man = manifold
-    G = man._jacobians.pattern(1).tocsr()
+    G = man._jacobian_g.pattern().tocsr()
     C = G[man.eq][:, man.state].tocsr()
     level = np.empty(man.eq.size, dtype=int)
     for k, rows in enumerate(man.levels):
@@ -50,7 +50,7 @@ def test_marching_equations_are_ordered_in_levels(manifold):
         uses = set(C.indices[C.indptr[e]:C.indptr[e + 1]].tolist()) - {man.match[e]}
         assert all(level[owner[u]] < level[e] for u in uses)
     assert len(man.levels) < man.eq.size / 10  # few levels: a product each
-    _, Gx = man._jacobians(man.nlp.project(man.nlp.x0))
+    (Gx,) = man._jacobian_g(man.nlp.project(man.nlp.x0))
     own = C.tocoo()
     own_value = Gx[own.data[own.col == man.match[own.row]].astype(int) - 1]
     assert np.abs(own_value).min() > 1e-3

@@ -1,0 +1,119 @@
+"""Jacobians assembled from local stencils (rffqm_nlp.stencils) against CasADi's Jacobian
+of the whole expression."""
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import rffqm_nlp as rq
+from rffqm_nlp import clearance, numpy_model, stencils
+from rffqm_nlp.lengths import side_length_lp
+
+
+def assembled(jac: stencils.LocalJacobian, x: np.ndarray):
+    """The stencil Jacobian at x as a scipy CSC matrix."""
+    G = jac.pattern()
+    G.data = jac(x)[0][G.data.astype(int) - 1]
+    return G
+
+
+def assert_same(G, reference) -> None:
+    """Same sparsity and the same values to round-off."""
+    reference = reference.tocsc()
+    reference.sort_indices()
+    assert G.shape == reference.shape
+    np.testing.assert_array_equal(G.indptr, reference.indptr)
+    np.testing.assert_array_equal(G.indices, reference.indices)
+    scale = max(1.0, np.abs(reference.data).max())
+    np.testing.assert_allclose(G.data, reference.data, rtol=0, atol=1e-13 * scale)
+
+
+def test_a_toy_stencil_with_a_repeated_column_and_linear_rows():
+    """g = (x_i x_{i+1}^2 + p_i x_i for i < 3, x_0 - 2 x_3): a variable twice in one
+    instance sums its two entries; the linear row comes as triplets."""
+    z, p = ca.SX.sym("z", 3), ca.SX.sym("p", 1)
+    f = ca.Function("f", [z, p], [z[0] * z[1] ** 2 + p * z[2]])
+    s = stencils.stencil(f, [[0, 1, 0], [1, 2, 1], [2, 3, 2]], [[0], [1], [2]],
+                         [[1.5], [-2.0], [0.5]])
+    const = stencils.Constant(np.array([3, 3]), np.array([0, 3]), np.array([1.0, -2.0]))
+    jac = stencils.LocalJacobian([s], [const], (4, 4))
+    x = ca.MX.sym("x", 4)
+    pv = [1.5, -2.0, 0.5]
+    g = ca.vertcat(*(x[i] * x[i + 1] ** 2 + pv[i] * x[i] for i in range(3)), x[0] - 2 * x[3])
+    value = np.array([0.3, -1.2, 2.0, 0.7])
+    assert_same(assembled(jac, value),
+                ca.Function("J", [x], [ca.jacobian(g, x)])(value).sparse())
+
+
+def test_rows_covered_twice_or_not_at_all_are_refused():
+    z, p = ca.SX.sym("z", 1), ca.SX.sym("p", 0)
+    s = stencils.stencil(ca.Function("f", [z, p], [z ** 2]), [[0], [1]], [[0], [0]])
+    with pytest.raises(RuntimeError, match="cover"):
+        stencils.LocalJacobian([s], [], (2, 2)).pattern()
+
+
+def test_index_arrays_of_the_wrong_shape_are_refused():
+    z, p = ca.SX.sym("z", 2), ca.SX.sym("p", 0)
+    with pytest.raises(ValueError, match="columns has shape"):
+        stencils.stencil(ca.Function("f", [z, p], [z[0] * z[1]]), [[0, 1, 2]], [[0]])
+
+
+def problem(name: str, n: int, **kw):
+    problem, _ = rq.load_design(f"targets/{name}.toml")
+    return replace(problem, panels=(n, n), **kw)
+
+
+def casadi_jacobian(nlp, x: np.ndarray):
+    return ca.Function("J", [nlp.x], [ca.jacobian(nlp.g, nlp.x)])(x).sparse()
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2 ** 16),
+       case=st.sampled_from([("sphere_cap", 4, {}), ("hyperboloid", 6, {}),
+                             ("quarter_vase", 8, {}), ("sphere_cap", 6, {"fix": ("omega",)}),
+                             ("hyperboloid", 4, {"correspondence": "free"}),
+                             ("quarter_vase", 6, {"correspondence": "free"})]))
+def test_the_simultaneous_constraints_jacobian_is_casadis(seed, case):
+    """The simultaneous transcription's g Jacobian from stencils has CasADi's sparsity and
+    values at a random point near the start (every block of rows: the panel cell, edge
+    directions, lifted multipliers, rotations, vertices, partial means, margins, boundary
+    MV, sides, a free correspondence's grid rows)."""
+    name, n, kw = case
+    nlp = problem(name, n, **kw).transcribe()
+    x = nlp.x0 + 0.05 * np.random.default_rng(seed).standard_normal(nlp.x0.size)
+    assert_same(assembled(nlp.g_jacobian, x), casadi_jacobian(nlp, x))
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 2 ** 16))
+def test_the_jacobian_is_casadis_with_valley_vertex_signs(seed):
+    """Started from a perturbed Miura with its zig-zag along j, every vertex sign sigma (a
+    parameter of the stencils) is -1; the bundled targets' starts have +1."""
+    prob = problem("hyperboloid", 6)
+    miura = rq.miura_boundary(6, 6, a=1.0, b=1.3, alpha0=1.1, layout="zigzag_j")
+    bd = side_length_lp(rq.perturb_angles(miura, 0.02, seed))
+    sigma = numpy_model.march(bd).sigma
+    assert np.all(sigma == -1)
+    start = prob.start()
+    nlp = prob.transcribe(initial=SimpleNamespace(
+        boundary=bd, omega=start.omega, rotation=start.rotation,
+        translation=start.translation))
+    x = nlp.x0 + 0.05 * np.random.default_rng(seed).standard_normal(nlp.x0.size)
+    assert_same(assembled(nlp.g_jacobian, x), casadi_jacobian(nlp, x))
+
+
+def test_clearance_rows_appended_to_the_nlp_join_its_stencils():
+    """NLP.with_rows (here the clearance rows of rffqm_nlp.clearance) extends the stencil
+    Jacobian by the new rows."""
+    prob = problem("sphere_cap", 6)
+    nlp = prob.transcribe()
+    pattern = numpy_model.march(prob.start().boundary)
+    pairs = np.array([[0, 7], [3, 20], [5, 30]])
+    out = clearance.constrain(nlp, pattern, 1.0, pairs, 0.01)
+    assert out.g.numel() > nlp.g.numel()
+    x = out.x0 + 0.01 * np.random.default_rng(1).standard_normal(out.x0.size)
+    assert_same(assembled(out.g_jacobian, x), casadi_jacobian(out, x))
