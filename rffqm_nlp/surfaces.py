@@ -84,8 +84,9 @@ class Surface:
 
     # -- the AD graph -------------------------------------------------------------------
     @cached_property
-    def _functions(self) -> tuple[ca.Function, ca.Function]:
-        """(r, geometry) CasADi Functions of (u, v), built once from one SX graph."""
+    def _functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
+        """(r, geometry, first derivatives) CasADi Functions of (u, v), built once from one
+        SX graph."""
         u, v = ca.SX.sym("u"), ca.SX.sym("v")
         r = ca.vertcat(*self._r(u, v))
         r_u, r_v = ca.jacobian(r, u), ca.jacobian(r, v)
@@ -101,7 +102,8 @@ class Surface:
         geometry = ca.Function(
             "geometry", [u, v], [r, r_u, r_v, n, ca.vertcat(e, f, g, l, m, nn), k, h],
             ["u", "v"], ["r", "r_u", "r_v", "n", "forms", "K", "H"])
-        return point, geometry
+        first = ca.Function("first", [u, v], [r, r_u, r_v], ["u", "v"], ["r", "r_u", "r_v"])
+        return point, geometry, first
 
     def casadi_function(self) -> ca.Function:
         """The CasADi Function (u, v) -> r (3x1), for use inside other CasADi graphs."""
@@ -254,9 +256,12 @@ class Surface:
         u, v = self.grid_uv(resolution, resolution)
         _, idx = cKDTree(self.sample(resolution, resolution).reshape(-1, 3)).query(pts)
         uu, vv = u[idx // resolution], v[idx % resolution]
+        active = np.arange(uu.size)  # the points still moving
         for _ in range(100):
-            uu, vv, moved = self._projection_step(pts, uu, vv)
-            if moved <= 1e-15:
+            new_u, new_v, moved = self._projection_step(pts[active], uu[active], vv[active])
+            uu[active], vv[active] = new_u, new_v
+            active = active[moved > 1e-15]
+            if active.size == 0:
                 break
         closest = self.point(uu, vv)
         dist = np.linalg.norm(closest - pts, axis=1)
@@ -264,11 +269,11 @@ class Surface:
                 dist.reshape(shape))
 
     def _projection_step(self, pts: np.ndarray, uu: np.ndarray, vv: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray, float]:
-        """One projected Gauss-Newton step with step halving; returns (u, v, largest move
-        relative to the domain size)."""
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One projected Gauss-Newton step with step halving for points (n, 3) at (u, v)
+        (n,) each; returns (u, v, each point's move relative to the domain size)."""
         (u0, u1), (v0, v1) = self.domain
-        _, (r, r_u, r_v, *_rest) = self._geometry(uu, vv)
+        _, (r, r_u, r_v) = self._evaluate(self._functions[2], uu, vv)
         r, r_u, r_v = r.T, r_u.T, r_v.T
         res = r - pts
         g_u, g_v = np.sum(r_u * res, 1), np.sum(r_v * res, 1)
@@ -281,17 +286,20 @@ class Surface:
         du, dv = np.where(fix_v, -g_u / e, du), np.where(fix_u, -g_v / g, dv)
         du, dv = np.where(fix_u, 0.0, du), np.where(fix_v, 0.0, dv)
         dist = np.linalg.norm(res, axis=1)
-        t, done = np.ones_like(uu), np.zeros(uu.shape, dtype=bool)
+        t = np.ones_like(uu)
         new_u, new_v = uu.copy(), vv.copy()
+        todo = np.arange(uu.size)  # the points whose step is not yet accepted
         for _ in range(30):
-            cu, cv = np.clip(uu + t * du, u0, u1), np.clip(vv + t * dv, v0, v1)
-            ok = ~done & (np.linalg.norm(self.point(cu, cv) - pts, axis=1) <= dist)
-            new_u[ok], new_v[ok], done = cu[ok], cv[ok], done | ok
-            if done.all():
+            cu = np.clip(uu[todo] + t[todo] * du[todo], u0, u1)
+            cv = np.clip(vv[todo] + t[todo] * dv[todo], v0, v1)
+            ok = np.linalg.norm(self.point(cu, cv) - pts[todo], axis=1) <= dist[todo]
+            new_u[todo[ok]], new_v[todo[ok]] = cu[ok], cv[ok]
+            todo = todo[~ok]
+            if todo.size == 0:
                 break
-            t = np.where(done, t, t / 2)
-        moved = max(np.max(np.abs(new_u - uu)) / (u1 - u0), np.max(np.abs(new_v - vv)) / (v1 - v0))
-        return new_u, new_v, float(moved)
+            t[todo] /= 2
+        return new_u, new_v, np.maximum(np.abs(new_u - uu) / (u1 - u0),
+                                        np.abs(new_v - vv) / (v1 - v0))
 
     # -- configuration ------------------------------------------------------------------
     def to_config(self) -> dict:
