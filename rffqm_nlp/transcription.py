@@ -771,157 +771,222 @@ def simultaneous(setup: Setup) -> NLP:
 def _constraint_jacobian(setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _MeanTree,
                          n_g: int) -> stencils.LocalJacobian:
     """The Jacobian of :func:`simultaneous`'s constraints g (n_g rows, in its order),
-    assembled from one stencil per kind of row: the same equations on a panel's or a
-    vertex's own variables (:mod:`rffqm_nlp.stencils`)."""
-    N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
-    kh0, _ = _fold_multipliers_kv(sigma)
-    out, const, at = [], [], [0]
+    assembled from one stencil per kind of row (:class:`_ConstraintStencils`)."""
+    return _ConstraintStencils(setup, lay, sigma, tree).jacobian(n_g)
 
-    def ix(name, i, j=0):
+
+def _grid(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j) of an n x m grid, each (n, m)."""
+    return np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+
+
+def _symbols(name: str, k: int) -> list[ca.SX]:
+    return [ca.SX.sym(f"{name}{c}") for c in range(k)]
+
+
+class _ConstraintStencils:
+    """The rows of :func:`simultaneous`'s g as stencils (:mod:`rffqm_nlp.stencils`): the
+    same equations, each on one panel's or vertex's own variables. One method per block of
+    rows, called in g's order, each taking the next rows."""
+
+    QUAT, FOLDED = ("Qw", "Qx", "Qy", "Qz"), ("Yx", "Yy", "Yz")
+
+    def __init__(self, setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _MeanTree):
+        self.setup, self.lay, self.sigma, self.tree = setup, lay, sigma, tree
+        self.N, self.M = sigma.shape[0] - 1, sigma.shape[1] - 1
+        self.kh0, _ = _fold_multipliers_kv(sigma)
+        self.stencils: list[stencils.Stencil] = []
+        self.constants: list[stencils.Constant] = []
+        self._next = 0
+
+    def jacobian(self, n_g: int) -> stencils.LocalJacobian:
+        N, M = self.N, self.M
+        march = self._rows((4, N, M))[0]
+        self._edge_directions()
+        self._multiplier_angles()
+        self._rotations()
+        self._vertices()
+        sides, root = self._partial_means()
+        self._cells([*march, *self._rows((N, M))])
+        self._boundary_mv()
+        self._sides(sides, root)
+        if self.setup.correspondence is not None:
+            self._grid_rows()
+        return stencils.LocalJacobian(self.stencils, self.constants, (n_g, self.lay.size))
+
+    # ------------------------------------------------------------------ helpers
+    def _ix(self, name: str, i, j=0) -> np.ndarray:
         """Indices in x of block ``name`` at (i, j) (broadcast)."""
+        lay = self.lay
         return lay.slices[name].start + np.asarray(i) + lay.shapes[name][0] * np.asarray(j)
 
-    def rows(*shape):
-        """The next rows of g: one column-major block per shape, as (block, ...)."""
+    def _omega(self, shape) -> np.ndarray:
+        return np.full(shape, self.lay.slices["omega"].start)
+
+    def _rows(self, *shapes) -> list[np.ndarray]:
+        """The next rows of g: one column-major block per shape."""
         blocks = []
-        for s in shape:
-            blocks.append(at[0] + np.arange(np.prod(s)).reshape(s, order="F"))
-            at[0] += blocks[-1].size
+        for s in shapes:
+            blocks.append(self._next + np.arange(np.prod(s)).reshape(s, order="F"))
+            self._next += blocks[-1].size
         return blocks
 
-    def sx(name, k):
-        return [ca.SX.sym(f"{name}{c}") for c in range(k)]
-
-    def add(name, z, p, expr, columns, rows_, params=()):
+    def _add(self, name: str, z: list, p: list, expr: list, columns: list, rows: list,
+             params: list = ()) -> None:
+        """A stencil of the expressions ``expr`` in the symbols z and p, with per-input,
+        per-output and per-param index arrays of one shape (:func:`stencils.repeated`)."""
         f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
                         [ca.vertcat(*expr)])
-        out.append(stencils.repeated(f, columns, rows_, list(params)))
+        self.stencils.append(stencils.repeated(f, columns, rows, list(params)))
 
-    grid = lambda n, m: np.meshgrid(np.arange(n), np.arange(m), indexing="ij")  # noqa: E731
-    i, j = grid(N, M)
-    S = sigma
-    quat = ("Qw", "Qx", "Qy", "Qz")
-    Ys = ("Yx", "Yy", "Yz")
-    # The panel cell (eq:marchingSector .. eq:getSides): vertex d, its sides, mu_abc.
-    march = rows((4, N, M))[0]
-    z = sx("z", 12)
-    a00, b00, a10, b10, a01, b01, a11, b11, lv0, lv1, lh0, lh1 = z
-    p = sx("p", 4)
-    xs, ys = panel_cell()(ca.vertcat(a10, b10, p[0], lv0),
-                          ca.vertcat(a00, b00, p[1], a01, b01, p[2], lh0))
-    side = vx.panel_side_residuals(a00, PI - b10, b01, lv0, lh0, lv1, lh1)
-    cell_z, cell_p = z, p
-    cell_expr = [a11 - xs[0], b11 - xs[1], *side, p[3] * (ys[1] ** 2 - 1)]
-    cell_columns = [ix("A", i, j), ix("B", i, j), ix("A", i + 1, j), ix("B", i + 1, j),
-                    ix("A", i, j + 1), ix("B", i, j + 1), ix("A", i + 1, j + 1),
-                    ix("B", i + 1, j + 1), ix("LV", i, j), ix("LV", i, j + 1),
-                    ix("LH", i, j), ix("LH", i + 1, j)]
-    cell_params = [S[1:, :M], S[:N, :M], S[:N, 1:],
-                   np.where(setup.mu_outside, 1.0, -1.0).reshape(N, M, order="F")]
-    # Edge directions (linear).
-    th0, th = rows((N,), (N + 1, M))
-    z = sx("z", 4)
-    add("theta_left", z, [], [z[0] - z[1] - (z[2] - z[3])],
-        [ix("TH", np.arange(1, N + 1)), ix("TH", np.arange(N)), ix("A", np.arange(N)),
-         ix("B", np.arange(1, N + 1))], [th0])
-    ii, jj = grid(N + 1, M)
-    add("theta", z, [], [z[0] - z[1] - (PI - z[2] - z[3])],
-        [ix("TH", ii, jj + 1), ix("TH", ii, jj), ix("A", ii, jj + 1), ix("B", ii, jj + 1)],
-        [th])
-    # Lifted fold multipliers (see _local_crease_quaternions).
-    phi0, phi = rows((M,), (N - 2, M))
-    z, p = sx("z", 3), sx("p", 2)
-    num, den = vx.mu2_terms(z[1], z[2], p[0])
-    cols = np.arange(M)
-    add("phi_bottom", z, p, [ca.sin(z[0]) * num + p[1] * ca.cos(z[0]) * den],
-        [ix("PHI", 0, cols), ix("A", 0, cols), ix("B", 0, cols)], [phi0],
-        [S[0, :M], S[1, :M] * kh0[:M]])
-    ii, jj = grid(N - 2, M)
-    z, p = sx("z", 2), sx("p", 1)
-    add("phi", z, p, [z[0] - p[0] * z[1]], [ix("PHI", ii + 1, jj), ix("PHI", ii, jj)],
-        [phi], [S[2:N, :M]])
-    # Panel rotations (eq:defGrads): the bottom row, then up the columns.
-    q0, q = rows((M - 1, 4), (N - 1, M, 4))
-    z, p = sx("z", 12), sx("p", 2)
-    omega = z[11]
-    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
-    num, den = vx.mu2_terms(z[9], z[10], p[0])
-    qv = crease_quaternion(z[8] + z[9], -p[1] * den, c, s, sign=-1.0, k_den=num)
-    prod = qmul(z[4:8], qv)
-    cols = np.arange(1, M)
-    add("rotation_bottom", z, p, [z[k] - prod[k] for k in range(4)],
-        [*(ix(n, 0, cols) for n in quat), *(ix(n, 0, cols - 1) for n in quat),
-         ix("TH", 0, cols), ix("A", 0, cols), ix("B", 0, cols),
-         np.full(M - 1, lay.slices["omega"].start)], [q0[:, k] for k in range(4)],
-        [S[0, 1:M], kh0[1:M]])
-    z, p = sx("z", 13), sx("p", 1)
-    omega = z[12]
-    c, s = ca.cos(omega / 2), ca.sin(omega / 2)
-    num, den = vx.mu2_terms(z[10], z[11], p[0])
-    qh = crease_quaternion(z[8], -ca.sin(z[9]) * num, c, s, k_den=ca.cos(z[9]) * den)
-    prod = qmul(z[4:8], qh)
-    ii, jj = grid(N - 1, M)
-    add("rotation", z, p, [z[k] - prod[k] for k in range(4)],
-        [*(ix(n, ii + 1, jj) for n in quat), *(ix(n, ii, jj) for n in quat),
-         ix("TH", ii + 1, jj), ix("PHI", ii, jj), ix("A", ii + 1, jj), ix("B", ii + 1, jj),
-         np.full(ii.shape, lay.slices["omega"].start)], [q[..., k] for k in range(4)],
-        [S[1:N, :M]])
-    # Folded vertices (eq:finalCalc): rotated edges, the bottom row, then up the columns.
-    y0, y = rows((M, 3), (N, M + 1, 3))
-    z = sx("z", 12)
-    edge = rotate_planar(z[6:10], z[10] * ca.cos(z[11]), z[10] * ca.sin(z[11]))
-    cols = np.arange(M)
-    add("vertex_bottom", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
-        [*(ix(n, 0, cols + 1) for n in Ys), *(ix(n, 0, cols) for n in Ys),
-         *(ix(n, 0, cols) for n in quat), ix("LH", 0, cols), ix("TH", 0, cols)],
-        [y0[:, k] for k in range(3)])
-    z = sx("z", 13)
-    edge = rotate_planar(z[6:10], z[10] * ca.cos(z[11] + z[12]), z[10] * ca.sin(z[11] + z[12]))
-    ii, jj = grid(N, M + 1)
-    panel = np.minimum(jj, M - 1)  # the last column's edges turn with the panel on its left
-    add("vertex", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
-        [*(ix(n, ii + 1, jj) for n in Ys), *(ix(n, ii, jj) for n in Ys),
-         *(ix(n, ii, panel) for n in quat), ix("LV", ii, jj), ix("TH", ii, jj),
-         ix("A", ii, jj)], [y[..., k] for k in range(3)])
-    # Partial means (linear).
-    sides = np.concatenate([ix("LH", *grid(N + 1, M)).ravel("F"),
-                            ix("LV", *grid(N, M + 1)).ravel("F")])
-    below, k = sides, lay.slices["P"].start
-    for W, r in zip(tree.levels, rows(*((W.size1(),) for W in tree.levels))):
-        node = np.arange(k, k + W.size1())
-        w = W.sparse().tocoo()
-        wr, wc, wv = w.row, w.col, w.data
-        const.append(stencils.Constant(np.concatenate([r, r[wr]]),
-                                       np.concatenate([node, below[wc]]),
-                                       np.concatenate([np.ones(r.size), -wv])))
-        below, k = node, k + W.size1()
-    root = k - 1
-    # The panel cell's rows, and its multiplier's margin sign * (mu^2 - 1) further down.
-    add("cell", cell_z, cell_p, cell_expr, cell_columns, [*march, *rows((N, M))],
-        cell_params)
-    # The boundary MV assignment, on the boundary vertices' angles.
-    nv = N + 1 + M
-    left, bottom = (np.arange(N + 1), np.zeros(N + 1, int)), (np.zeros(M, int), np.arange(1, M + 1))
-    angles = [np.concatenate([ix(n, *left), ix(n, *bottom)]) for n in ("A", "B")]
-    a, b = ca.SX.sym("a", nv), ca.SX.sym("b", nv)
-    mv, _, _ = setup.boundary_mv(a, b)
-    out.append(stencils.stencil(ca.Function("mv", [ca.vertcat(a, b), ca.SX.sym("p", 0)], [mv]),
-                                np.concatenate(angles)[None, :], rows((nv,))[0][None, :]))
-    # Sides against the mean side (linear).
-    r = rows((sides.size,))[0]
-    const.append(stencils.Constant(np.concatenate([r, r]),
-                                   np.concatenate([sides, np.full(r.size, root)]),
-                                   np.concatenate([np.ones(r.size),
-                                                   np.full(r.size, -setup.min_length)])))
-    corr = setup.correspondence
-    if corr is not None:  # the grid rows of the free correspondence, on the grid
+    def _whole(self, name: str, inputs: list[ca.SX], expr: ca.SX, columns: np.ndarray
+               ) -> None:
+        """One instance on the variables ``columns`` (in the order of ``inputs``)."""
+        f = ca.Function(name, [ca.vertcat(*(ca.vec(a) for a in inputs)), ca.SX.sym("p", 0)],
+                        [expr])
+        self.stencils.append(stencils.stencil(f, columns[None, :],
+                                              self._rows((expr.numel(),))[0][None, :]))
+
+    # ------------------------------------------------------------------ blocks of g
+    def _cells(self, rows: list[np.ndarray]) -> None:
+        """The panel cell (eq:marchingSector .. eq:getSides): vertex d and the sides of d
+        (4 rows per panel), and the margin sign * (mu_abc^2 - 1) (``rows``: 5 blocks)."""
+        N, M, S, ix = self.N, self.M, self.sigma, self._ix
+        i, j = _grid(N, M)
+        z, p = _symbols("z", 12), _symbols("p", 4)
+        a00, b00, a10, b10, a01, b01, a11, b11, lv0, lv1, lh0, lh1 = z
+        xs, ys = panel_cell()(ca.vertcat(a10, b10, p[0], lv0),
+                              ca.vertcat(a00, b00, p[1], a01, b01, p[2], lh0))
+        side = vx.panel_side_residuals(a00, PI - b10, b01, lv0, lh0, lv1, lh1)
+        self._add("cell", z, p, [a11 - xs[0], b11 - xs[1], *side, p[3] * (ys[1] ** 2 - 1)],
+                  [ix("A", i, j), ix("B", i, j), ix("A", i + 1, j), ix("B", i + 1, j),
+                   ix("A", i, j + 1), ix("B", i, j + 1), ix("A", i + 1, j + 1),
+                   ix("B", i + 1, j + 1), ix("LV", i, j), ix("LV", i, j + 1),
+                   ix("LH", i, j), ix("LH", i + 1, j)], rows,
+                  [S[1:, :M], S[:N, :M], S[:N, 1:],
+                   np.where(self.setup.mu_outside, 1.0, -1.0).reshape(N, M, order="F")])
+
+    def _edge_directions(self) -> None:
+        """TH along the left column, then along the rows (linear)."""
+        N, M, ix = self.N, self.M, self._ix
+        left, rows = self._rows((N,), (N + 1, M))
+        z = _symbols("z", 4)
+        k = np.arange(N)
+        self._add("theta_left", z, [], [z[0] - z[1] - (z[2] - z[3])],
+                  [ix("TH", k + 1), ix("TH", k), ix("A", k), ix("B", k + 1)], [left])
+        i, j = _grid(N + 1, M)
+        self._add("theta", z, [], [z[0] - z[1] - (PI - z[2] - z[3])],
+                  [ix("TH", i, j + 1), ix("TH", i, j), ix("A", i, j + 1), ix("B", i, j + 1)],
+                  [rows])
+
+    def _multiplier_angles(self) -> None:
+        """PHI of the bottom row from its vertex, then the chain up the columns (see
+        :func:`_local_crease_quaternions`)."""
+        N, M, S, ix = self.N, self.M, self.sigma, self._ix
+        bottom, rows = self._rows((M,), (N - 2, M))
+        z, p = _symbols("z", 3), _symbols("p", 2)
+        num, den = vx.mu2_terms(z[1], z[2], p[0])
+        j = np.arange(M)
+        self._add("phi_bottom", z, p, [ca.sin(z[0]) * num + p[1] * ca.cos(z[0]) * den],
+                  [ix("PHI", 0, j), ix("A", 0, j), ix("B", 0, j)], [bottom],
+                  [S[0, :M], S[1, :M] * self.kh0[:M]])
+        z, p = _symbols("z", 2), _symbols("p", 1)
+        i, j = _grid(N - 2, M)
+        self._add("phi", z, p, [z[0] - p[0] * z[1]], [ix("PHI", i + 1, j), ix("PHI", i, j)],
+                  [rows], [S[2:N, :M]])
+
+    def _rotations(self) -> None:
+        """Panel rotations (eq:defGrads): R times a crease quaternion, along the bottom row,
+        then up the columns."""
+        N, M, S, ix, Q = self.N, self.M, self.sigma, self._ix, self.QUAT
+        bottom, rows = self._rows((M - 1, 4), (N - 1, M, 4))
+        z, p = _symbols("z", 12), _symbols("p", 2)
+        c, s = ca.cos(z[11] / 2), ca.sin(z[11] / 2)
+        num, den = vx.mu2_terms(z[9], z[10], p[0])
+        qv = crease_quaternion(z[8] + z[9], -p[1] * den, c, s, sign=-1.0, k_den=num)
+        prod = qmul(z[4:8], qv)
+        j = np.arange(1, M)
+        self._add("rotation_bottom", z, p, [z[k] - prod[k] for k in range(4)],
+                  [*(ix(n, 0, j) for n in Q), *(ix(n, 0, j - 1) for n in Q), ix("TH", 0, j),
+                   ix("A", 0, j), ix("B", 0, j), self._omega(j.shape)],
+                  [bottom[:, k] for k in range(4)], [S[0, 1:M], self.kh0[1:M]])
+        z, p = _symbols("z", 13), _symbols("p", 1)
+        c, s = ca.cos(z[12] / 2), ca.sin(z[12] / 2)
+        num, den = vx.mu2_terms(z[10], z[11], p[0])
+        qh = crease_quaternion(z[8], -ca.sin(z[9]) * num, c, s, k_den=ca.cos(z[9]) * den)
+        prod = qmul(z[4:8], qh)
+        i, j = _grid(N - 1, M)
+        self._add("rotation", z, p, [z[k] - prod[k] for k in range(4)],
+                  [*(ix(n, i + 1, j) for n in Q), *(ix(n, i, j) for n in Q),
+                   ix("TH", i + 1, j), ix("PHI", i, j), ix("A", i + 1, j), ix("B", i + 1, j),
+                   self._omega(i.shape)], [rows[..., k] for k in range(4)], [S[1:N, :M]])
+
+    def _vertices(self) -> None:
+        """Folded vertices (eq:finalCalc): the previous one plus a rotated edge, along the
+        bottom row, then up the columns (the last column's edges turn with the panel on
+        their left)."""
+        N, M, ix, Q, Y = self.N, self.M, self._ix, self.QUAT, self.FOLDED
+        bottom, rows = self._rows((M, 3), (N, M + 1, 3))
+        z = _symbols("z", 12)
+        edge = rotate_planar(z[6:10], z[10] * ca.cos(z[11]), z[10] * ca.sin(z[11]))
+        j = np.arange(M)
+        self._add("vertex_bottom", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
+                  [*(ix(n, 0, j + 1) for n in Y), *(ix(n, 0, j) for n in Y),
+                   *(ix(n, 0, j) for n in Q), ix("LH", 0, j), ix("TH", 0, j)],
+                  [bottom[:, k] for k in range(3)])
+        z = _symbols("z", 13)
+        theta = z[11] + z[12]
+        edge = rotate_planar(z[6:10], z[10] * ca.cos(theta), z[10] * ca.sin(theta))
+        i, j = _grid(N, M + 1)
+        panel = np.minimum(j, M - 1)
+        self._add("vertex", z, [], [z[k] - z[3 + k] - edge[k] for k in range(3)],
+                  [*(ix(n, i + 1, j) for n in Y), *(ix(n, i, j) for n in Y),
+                   *(ix(n, i, panel) for n in Q), ix("LV", i, j), ix("TH", i, j),
+                   ix("A", i, j)], [rows[..., k] for k in range(3)])
+
+    def _partial_means(self) -> tuple[np.ndarray, int]:
+        """The tree of partial means (:class:`_MeanTree`, linear); returns (the sides'
+        indices in x, in the tree's order; the root's index)."""
+        N, M = self.N, self.M
+        sides = np.concatenate([self._ix("LH", *_grid(N + 1, M)).ravel("F"),
+                                self._ix("LV", *_grid(N, M + 1)).ravel("F")])
+        below, k = sides, self.lay.slices["P"].start
+        levels = self.tree.levels
+        for W, r in zip(levels, self._rows(*((W.size1(),) for W in levels))):
+            node = np.arange(k, k + W.size1())
+            w = W.sparse().tocoo()
+            self.constants.append(stencils.Constant(np.concatenate([r, r[w.row]]),
+                                                    np.concatenate([node, below[w.col]]),
+                                                    np.concatenate([np.ones(r.size),
+                                                                    -w.data])))
+            below, k = node, k + W.size1()
+        return sides, k - 1
+
+    def _boundary_mv(self) -> None:
+        """The boundary MV assignment (:meth:`Setup.boundary_mv`), on the boundary
+        vertices' angles, left then bottom."""
+        N, M, ix = self.N, self.M, self._ix
+        nv = N + 1 + M
+        i = np.concatenate([np.arange(N + 1), np.zeros(M, int)])
+        j = np.concatenate([np.zeros(N + 1, int), np.arange(1, M + 1)])
+        a, b = ca.SX.sym("a", nv), ca.SX.sym("b", nv)
+        mv, _, _ = self.setup.boundary_mv(a, b)
+        self._whole("mv", [a, b], mv, np.concatenate([ix("A", i, j), ix("B", i, j)]))
+
+    def _sides(self, sides: np.ndarray, root: int) -> None:
+        """Every side against min_length times the mean side (linear)."""
+        r = self._rows((sides.size,))[0]
+        self.constants.append(stencils.Constant(
+            np.concatenate([r, r]), np.concatenate([sides, np.full(r.size, root)]),
+            np.concatenate([np.ones(r.size), np.full(r.size, -self.setup.min_length)])))
+
+    def _grid_rows(self) -> None:
+        """The grid rows of a free correspondence (:meth:`Correspondence.rows`)."""
+        corr, lay = self.setup.correspondence, self.lay
         U, V = (ca.SX.sym(n, *corr.U0.shape) for n in ("U", "V"))
         g, _, _ = corr.rows(U, V)
-        out.append(stencils.stencil(
-            ca.Function("grid", [ca.vertcat(ca.vec(U), ca.vec(V)), ca.SX.sym("p", 0)], [g]),
-            np.concatenate([np.arange(lay.slices[n].start, lay.slices[n].stop)
-                            for n in ("U", "V")])[None, :], rows((g.numel(),))[0][None, :]))
-    return stencils.LocalJacobian(out, const, (n_g, lay.size))
+        self._whole("grid", [U, V], g, np.concatenate(
+            [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]))
 
 
 def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):
