@@ -151,7 +151,6 @@ class _Buffered:
     """A CasADi Function of x evaluated into preallocated NumPy arrays (its nonzeros)."""
 
     def __init__(self, function: ca.Function):
-        self.function = function
         self._buffer, self._eval = function.buffer()
         self._x = np.zeros(function.nnz_in(0))
         self._buffer.set_arg(0, memoryview(self._x))
@@ -163,13 +162,6 @@ class _Buffered:
         self._x[:] = x
         self._eval()
         return [out.copy() for out in self.out]
-
-    def pattern(self, i: int) -> sp.csc_matrix:
-        """Output i's sparsity with data = 1 + the index of each nonzero."""
-        s = self.function.sparsity_out(i)
-        colind, row = s.get_ccs()
-        return sp.csc_matrix((np.arange(1, s.nnz() + 1, dtype=float), row, colind),
-                             shape=s.shape)
 
 
 class _Sliced:
@@ -473,13 +465,13 @@ class Manifold:
     """The simultaneous NLP split into its design and its marched state.
 
     Built once per NLP: the index sets (``state`` in the order of the levels of the
-    marching equations), the levels, the CasADi Functions of the residuals and
-    constraints (trial points) and of the residuals' Jacobian, and the constraints' Jacobian
-    from local stencils (``nlp.g_jacobian``; accepted points).
+    marching equations), the levels, the CasADi Function of the residuals and constraints
+    (trial points) and their Jacobians from local stencils (``nlp.r_jacobian``,
+    ``nlp.g_jacobian``; accepted points).
     """
 
     def __init__(self, nlp: NLP):
-        if nlp.project is None or nlp.design_index is None or nlp.g_jacobian is None:
+        if nlp.project is None or nlp.design_index is None or nlp.r_jacobian is None:
             raise InputError("solver='levenberg-marquardt' needs the simultaneous transcription")
         self.nlp = nlp
         n = nlp.x.numel()
@@ -495,9 +487,7 @@ class Manifold:
             raise RuntimeError(f"{self.eq.size} marching equations for {self.state.size} "
                                "state variables")
         self._values = _Buffered(ca.Function("values", [nlp.x], [nlp.residuals, nlp.g]))
-        self._jacobian_r = _Buffered(ca.Function("jacobian_r", [nlp.x],
-                                                 [ca.jacobian(nlp.residuals, nlp.x)]))
-        self._jacobian_g = nlp.g_jacobian
+        self._jacobian_r, self._jacobian_g = nlp.r_jacobian, nlp.g_jacobian
         self._order_by_level()
         where = np.full(n, -1)
         where[self.state] = np.arange(self.state.size)
@@ -537,7 +527,7 @@ class Manifold:
     def _slice_jacobians(self) -> None:
         """The fixed blocks of J and G, the marching equations by level (:class:`_Levels`)
         and the pass that reduces J and the metric through them (:class:`_Window`)."""
-        J = self._jacobian_r.pattern(0).tocsr()
+        J = self._jacobian_r.pattern().tocsr()
         G = self._jacobian_g.pattern().tocsr()
         self._J_design = _Sliced(J[:, self.design])
         self._J_state = _Sliced(J[:, self.state])
@@ -592,7 +582,7 @@ class Manifold:
     def linearize(self, p: _Point) -> _Linearization | None:
         """The derivatives at p; None where they are not finite or the marching equations
         no longer determine their unknowns. Invalidates the last point's."""
-        (J,), (G,) = self._jacobian_r(p.x), self._jacobian_g(p.x)
+        J, G = self._jacobian_r(p.x), self._jacobian_g(p.x)
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
             return None
         if not self._sweeps.refill(G):

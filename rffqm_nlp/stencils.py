@@ -63,6 +63,15 @@ def repeated(function: ca.Function, columns: list[np.ndarray], rows: list[np.nda
                    None if not params else flat(params))
 
 
+def single(name: str, inputs: list, expr, columns: np.ndarray, rows: np.ndarray) -> Stencil:
+    """One instance: the rows ``rows`` (m,) of g are ``expr`` (m values) of the symbols
+    ``inputs`` (SX or MX, each vectorised column-major), which are x[columns]."""
+    z = ca.vertcat(*(ca.vec(a) for a in inputs))
+    p = (ca.SX if isinstance(z, ca.SX) else ca.MX).sym("p", 0)
+    return stencil(ca.Function(name, [z, p], [expr]), np.asarray(columns)[None, :],
+                   np.asarray(rows)[None, :])
+
+
 @dataclass(frozen=True)
 class Constant:
     """Rows with a constant Jacobian, as triplets (rows, columns, values), each (e,)."""
@@ -104,9 +113,8 @@ class LocalJacobian:
     must cover every row of g once.
 
     :meth:`pattern` gives its sparsity with data = 1 + the index of each nonzero, and
-    calling it at x its nonzeros (nnz,) in that order: the interface of a CasADi Jacobian
-    Function's output that :mod:`rffqm_nlp.reduced` slices. The maps and the scatter are
-    built at the first use.
+    calling it at x its nonzeros (nnz,) in that order (what :mod:`rffqm_nlp.reduced`
+    slices). The maps and the scatter are built at the first use.
     """
 
     def __init__(self, stencils: list[Stencil], constants: list[Constant],
@@ -141,15 +149,15 @@ class LocalJacobian:
         self._mapped = mapped
         return mapped
 
-    def pattern(self, i: int = 0) -> sp.csc_matrix:
-        """The sparsity, data = 1 + the index of each nonzero (``i``: only output 0)."""
+    def pattern(self) -> sp.csc_matrix:
+        """The sparsity, data = 1 + the index of each nonzero."""
         self._build()
         return self._pattern.copy()
 
-    def __call__(self, x: np.ndarray) -> list[np.ndarray]:
-        """[the nonzeros (nnz,)] at x (n_x,)."""
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The nonzeros (nnz,) at x (n_x,)."""
         mapped = self._build()
         for m in mapped:
             m(x)
         values = np.concatenate([m.out for m in mapped] + [self._constant])
-        return [np.bincount(self._position, weights=values, minlength=self._pattern.nnz)]
+        return np.bincount(self._position, weights=values, minlength=self._pattern.nnz)

@@ -68,8 +68,10 @@ class NLP:
     free_target: ca.Function | None = None
     #: indices in x of that correspondence's grid, U then V (each column-major)
     grid_index: np.ndarray | None = None
-    #: g's Jacobian from local stencils (:mod:`rffqm_nlp.stencils`), for
-    #: :mod:`rffqm_nlp.reduced`; None: only CasADi's Jacobian of g
+    #: the Jacobians of the residuals and of g assembled from local stencils
+    #: (:mod:`rffqm_nlp.stencils`), for :mod:`rffqm_nlp.reduced`; None: only CasADi's
+    #: Jacobians of the whole graph
+    r_jacobian: stencils.LocalJacobian | None = None
     g_jacobian: stencils.LocalJacobian | None = None
 
     @property
@@ -765,6 +767,7 @@ def simultaneous(setup: Setup) -> NLP:
                damping_weights=weights, design_index=design,
                pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
                grid_index=None if corr is None else grid_index,
+               r_jacobian=_residual_jacobian(setup, lay, res.numel()),
                g_jacobian=_constraint_jacobian(setup, lay, start.sigma, tree, g.numel()))
 
 
@@ -773,6 +776,40 @@ def _constraint_jacobian(setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _M
     """The Jacobian of :func:`simultaneous`'s constraints g (n_g rows, in its order),
     assembled from one stencil per kind of row (:class:`_ConstraintStencils`)."""
     return _ConstraintStencils(setup, lay, sigma, tree).jacobian(n_g)
+
+
+def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int) -> stencils.LocalJacobian:
+    """The Jacobian of :func:`simultaneous`'s residuals (n_r rows): one instance of
+    :func:`_objective_residuals` on the variables it reads (the coarse lattice's folded
+    vertices, the alignment, the boundary data vector and a free correspondence's grid), a
+    far smaller graph than the NLP's."""
+    N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
+    i, j = _grid(N // 2 + 1, M // 2 + 1)
+    lattice = [ca.MX.sym(n, *i.shape) for n in ("Yx", "Yy", "Yz")]
+    columns = [_index(lay, n, 2 * i, 2 * j).ravel("F") for n in ("Yx", "Yy", "Yz")]
+    rigid = ca.MX.sym("rigid", 7)
+    columns.append(np.arange(lay.slices["rigid"].start, lay.slices["rigid"].stop))
+    left, bottom = np.arange(N + 1), np.arange(1, M + 1)
+    boundary = np.concatenate([_index(lay, "A", left, 0), _index(lay, "A", 0, bottom),
+                               _index(lay, "B", left, 0), _index(lay, "B", 0, bottom),
+                               _index(lay, "LV", left[:-1], 0), _index(lay, "LH", 0, bottom - 1),
+                               [lay.slices["omega"].start]])
+    bvec = ca.MX.sym("boundary", boundary.size)
+    inputs, grid = [*lattice, rigid, bvec], None
+    columns.append(boundary)
+    if setup.correspondence is not None:
+        grid = tuple(ca.MX.sym(n, *setup.correspondence.U0.shape) for n in ("U", "V"))
+        inputs += grid
+        columns += [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]
+    expr = _objective_residuals(setup, lattice, rigid, bvec, grid)
+    return stencils.LocalJacobian([stencils.single("residuals", inputs, expr,
+                                                   np.concatenate(columns), np.arange(n_r))],
+                                  [], (n_r, lay.size))
+
+
+def _index(lay: _Layout, name: str, i, j=0) -> np.ndarray:
+    """Indices in x of block ``name`` of ``lay`` at (i, j) (broadcast)."""
+    return lay.slices[name].start + np.asarray(i) + lay.shapes[name][0] * np.asarray(j)
 
 
 def _grid(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -816,9 +853,7 @@ class _ConstraintStencils:
 
     # ------------------------------------------------------------------ helpers
     def _ix(self, name: str, i, j=0) -> np.ndarray:
-        """Indices in x of block ``name`` at (i, j) (broadcast)."""
-        lay = self.lay
-        return lay.slices[name].start + np.asarray(i) + lay.shapes[name][0] * np.asarray(j)
+        return _index(self.lay, name, i, j)
 
     def _omega(self, shape) -> np.ndarray:
         return np.full(shape, self.lay.slices["omega"].start)
@@ -842,10 +877,8 @@ class _ConstraintStencils:
     def _whole(self, name: str, inputs: list[ca.SX], expr: ca.SX, columns: np.ndarray
                ) -> None:
         """One instance on the variables ``columns`` (in the order of ``inputs``)."""
-        f = ca.Function(name, [ca.vertcat(*(ca.vec(a) for a in inputs)), ca.SX.sym("p", 0)],
-                        [expr])
-        self.stencils.append(stencils.stencil(f, columns[None, :],
-                                              self._rows((expr.numel(),))[0][None, :]))
+        self.stencils.append(stencils.single(name, inputs, expr, columns,
+                                             self._rows((expr.numel(),))[0]))
 
     # ------------------------------------------------------------------ blocks of g
     def _cells(self, rows: list[np.ndarray]) -> None:

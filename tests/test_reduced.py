@@ -50,7 +50,7 @@ def test_marching_equations_are_ordered_in_levels(manifold):
         uses = set(C.indices[C.indptr[e]:C.indptr[e + 1]].tolist()) - {man.match[e]}
         assert all(level[owner[u]] < level[e] for u in uses)
     assert len(man.levels) < man.eq.size / 10  # few levels: a product each
-    (Gx,) = man._jacobian_g(man.nlp.project(man.nlp.x0))
+    Gx = man._jacobian_g(man.nlp.project(man.nlp.x0))
     own = C.tocoo()
     own_value = Gx[own.data[own.col == man.match[own.row]].astype(int) - 1]
     assert np.abs(own_value).min() > 1e-3

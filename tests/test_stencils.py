@@ -17,7 +17,7 @@ from rffqm_nlp.lengths import side_length_lp
 def assembled(jac: stencils.LocalJacobian, x: np.ndarray):
     """The stencil Jacobian at x as a scipy CSC matrix."""
     G = jac.pattern()
-    G.data = jac(x)[0][G.data.astype(int) - 1]
+    G.data = jac(x)[G.data.astype(int) - 1]
     return G
 
 
@@ -67,25 +67,30 @@ def problem(name: str, n: int, **kw):
     return replace(problem, panels=(n, n), **kw)
 
 
-def casadi_jacobian(nlp, x: np.ndarray):
-    return ca.Function("J", [nlp.x], [ca.jacobian(nlp.g, nlp.x)])(x).sparse()
+def casadi_jacobian(nlp, x: np.ndarray, of: str = "g"):
+    return ca.Function("J", [nlp.x], [ca.jacobian(getattr(nlp, of), nlp.x)])(x).sparse()
 
 
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 2 ** 16),
        case=st.sampled_from([("sphere_cap", 4, {}), ("hyperboloid", 6, {}),
                              ("quarter_vase", 8, {}), ("sphere_cap", 6, {"fix": ("omega",)}),
+                             ("hyperboloid", 6, {"weights": {"position": 1.0, "forms": 0.5,
+                                                             "regularization": 0.2,
+                                                             "smoothness": 0.3}}),
                              ("hyperboloid", 4, {"correspondence": "free"}),
                              ("quarter_vase", 6, {"correspondence": "free"})]))
-def test_the_simultaneous_constraints_jacobian_is_casadis(seed, case):
-    """The simultaneous transcription's g Jacobian from stencils has CasADi's sparsity and
-    values at a random point near the start (every block of rows: the panel cell, edge
+def test_the_simultaneous_jacobians_are_casadis(seed, case):
+    """The simultaneous transcription's Jacobians from stencils have CasADi's sparsity and
+    values at a random point near the start: g's (every block of rows: the panel cell, edge
     directions, lifted multipliers, rotations, vertices, partial means, margins, boundary
-    MV, sides, a free correspondence's grid rows)."""
+    MV, sides, a free correspondence's grid rows) and the residuals' (the loss, the
+    alignment's norm, the Tikhonov and smoothness terms, a free grid's Tikhonov term)."""
     name, n, kw = case
     nlp = problem(name, n, **kw).transcribe()
     x = nlp.x0 + 0.05 * np.random.default_rng(seed).standard_normal(nlp.x0.size)
     assert_same(assembled(nlp.g_jacobian, x), casadi_jacobian(nlp, x))
+    assert_same(assembled(nlp.r_jacobian, x), casadi_jacobian(nlp, x, "residuals"))
 
 
 @settings(max_examples=4, deadline=None)
