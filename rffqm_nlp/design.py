@@ -718,13 +718,13 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 
 # ---------------------------------------------------------------------- memory
 #: The memory model of :func:`memory_estimate` (bytes), fitted to the peaks measured on the
-#: sphere cap, quarter vase and hyperboloid up to 200 x 200 panels (docs/solvers.md): what
+#: sphere cap, quarter vase and hyperboloid up to 300 x 300 panels (docs/solvers.md): what
 #: every solve holds (Python, CasADi, the NLP) ...
 MEMORY_BASE = 150e6
 #: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
-#: transcriptions with MUMPS' factor; "levenberg-marquardt": the build of the sparse
-#: Jacobians, its peak, and the marching) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 60e3, "simultaneous": 190e3, "sequential": 250e3}
+#: transcriptions with MUMPS' factor; "levenberg-marquardt": the NLP, its Jacobians from
+#: stencils and their blocks by level) ...
+MEMORY_PER_PANEL = {"levenberg-marquardt": 26e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
@@ -743,9 +743,8 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     measurements, see :data:`MEMORY_BASE`; a multistart solves one start at a time).
 
     For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
-    WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2 (the
-    build's peak and the working set added, though they do not coincide: an upper
-    estimate), for n_d = 3 (P + Q) design variables plus the 2 (P/2 + 1) (Q/2 + 1) grid
+    WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
+    n_d = 3 (P + Q) design variables plus the 2 (P/2 + 1) (Q/2 + 1) grid
     variables of a free correspondence (an extrapolation, not measured); IPOPT needs
     MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
     the sequential transcription)."""
