@@ -92,8 +92,7 @@ class _Mapped:
         colind, row = jac.sparsity_out(0).get_ccs()
         col = np.repeat(np.arange(len(colind) - 1), np.diff(colind))
         n = s.columns.shape[0]
-        self.rows = s.rows[:, row].ravel()  # the C order of ``out``: instance by instance
-        self.columns = s.columns[:, col].ravel()
+        self._stencil, self._local = s, (row, col)
         self._index = s.columns
         self._z = np.zeros(s.columns.shape)
         self._p = s.params
@@ -102,6 +101,12 @@ class _Mapped:
         self._buffer.set_arg(1, memoryview(self._p))
         self.out = np.zeros(n * len(row))
         self._buffer.set_res(0, memoryview(self.out))
+
+    def entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows and columns in g and x of the nonzeros of ``out`` (each (n nnz,),
+        instance by instance)."""
+        row, col = self._local
+        return self._stencil.rows[:, row].ravel(), self._stencil.columns[:, col].ravel()
 
     def __call__(self, x: np.ndarray) -> None:
         np.take(x, self._index, out=self._z)
@@ -138,10 +143,10 @@ class LocalJacobian:
             raise RuntimeError("the stencils do not cover each constraint row once")
         mapped = [_Mapped(s) for s in self.stencils]
         self._constant = np.concatenate([c.values for c in self.constants] + [np.zeros(0)])
-        rows = np.concatenate([m.rows for m in mapped] + [c.rows for c in self.constants])
-        cols = np.concatenate([m.columns for m in mapped]
-                              + [c.columns for c in self.constants])
-        key, self._position = np.unique(cols * n_g + rows, return_inverse=True)
+        entries = [m.entries() for m in mapped] + [(c.rows, c.columns) for c in self.constants]
+        key = np.concatenate([cols * n_g + rows for rows, cols in entries])
+        del entries
+        key, self._position = np.unique(key, return_inverse=True)
         col, row = np.divmod(key, n_g)
         self._pattern = sp.csc_matrix((np.arange(1, key.size + 1, dtype=float), (row, col)),
                                       shape=self.shape)
