@@ -21,8 +21,8 @@ from .collisions import CollisionReport, collisions
 
 _SUBMODULES = ("numpy_model", "marching", "vertex", "boundary", "pattern", "backend", "errors",
                "lengths", "surfaces", "meshes", "shape", "curvature", "design", "transcription",
-               "reduced", "clearance", "results", "files", "foldfile", "export", "viz", "view",
-               "cli", "sweeps")
+               "reduced", "stencils", "clearance", "results", "files", "foldfile", "export",
+               "viz", "view", "cli", "sweeps")
 
 
 def __getattr__(name: str):

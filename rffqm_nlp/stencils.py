@@ -82,8 +82,8 @@ class Constant:
 
 
 class _Mapped:
-    """One stencil's Jacobian, mapped over its instances and evaluated into a slice of the
-    assembled values."""
+    """One stencil's Jacobian, mapped over its instances, evaluated into ``out`` (its
+    nonzeros, instance by instance)."""
 
     def __init__(self, s: Stencil):
         f = s.function
