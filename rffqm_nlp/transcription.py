@@ -10,7 +10,9 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
 Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term, the
 inline constraints (angle bounds, multiplier margins, the boundary MV assignment, sides
 against the mean side) and a free correspondence's grid (:class:`Correspondence`), so they
-state the same problem.
+state the same problem. The simultaneous NLP also carries the Jacobians of its residuals and
+constraints assembled from local stencils (:class:`_ConstraintStencils`), which
+:mod:`rffqm_nlp.reduced` uses instead of CasADi's Jacobians of the whole graph.
 """
 
 from __future__ import annotations
