@@ -488,7 +488,8 @@ class Manifold:
                                "state variables")
         self._values = _Buffered(ca.Function("values", [nlp.x], [nlp.residuals, nlp.g]))
         self._jacobian_r, self._jacobian_g = nlp.r_jacobian, nlp.g_jacobian
-        self._order_by_level()
+        G = self._jacobian_g.pattern().tocsr()  # data = 1 + the index of each nonzero
+        self._order_by_level(G)
         where = np.full(n, -1)
         where[self.state] = np.arange(self.state.size)
         pattern = np.zeros(n, dtype=bool)
@@ -502,13 +503,14 @@ class Manifold:
         self.bounded_state = np.flatnonzero(bounded[self.state])
         self.lower = self.inequalities(nlp.lbg, nlp.lbx)
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
-        self._slice_jacobians()
+        self._slice_jacobians(G)
 
-    def _order_by_level(self) -> None:
+    def _order_by_level(self, G: sp.csr_matrix) -> None:
         """The matching of marching equations to state unknowns (``match``), their levels
         (:meth:`_levels`), and the state reordered by level: the unknowns of each level
-        contiguous, in the order of its equations."""
-        Cs = self._jacobian_g.pattern().tocsr()[self.eq][:, self.state].tocsr()
+        contiguous, in the order of its equations. ``G``: the constraints' Jacobian pattern
+        (n_g x n_x, data = 1 + the index of each nonzero)."""
+        Cs = G[self.eq][:, self.state].tocsr()
         match = maximum_bipartite_matching(Cs, perm_type="column")
         if np.any(match < 0):
             raise RuntimeError("the marching equations are structurally singular in the state")
@@ -524,11 +526,11 @@ class Manifold:
         position[order] = np.arange(order.size)
         self.match = position[match]  # the unknown (state index) of each marching equation
 
-    def _slice_jacobians(self) -> None:
-        """The fixed blocks of J and G, the marching equations by level (:class:`_Levels`)
-        and the pass that reduces J and the metric through them (:class:`_Window`)."""
+    def _slice_jacobians(self, G: sp.csr_matrix) -> None:
+        """The fixed blocks of J and G (the pattern of :meth:`_order_by_level`), the
+        marching equations by level (:class:`_Levels`) and the pass that reduces J and the
+        metric through them (:class:`_Window`)."""
         J = self._jacobian_r.pattern().tocsr()
-        G = self._jacobian_g.pattern().tocsr()
         self._J_design = _Sliced(J[:, self.design])
         self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]

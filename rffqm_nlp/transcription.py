@@ -791,11 +791,7 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int) -> stencils.LocalJa
     columns = [_index(lay, n, 2 * i, 2 * j).ravel("F") for n in ("Yx", "Yy", "Yz")]
     rigid = ca.MX.sym("rigid", 7)
     columns.append(np.arange(lay.slices["rigid"].start, lay.slices["rigid"].stop))
-    left, bottom = np.arange(N + 1), np.arange(1, M + 1)
-    boundary = np.concatenate([_index(lay, "A", left, 0), _index(lay, "A", 0, bottom),
-                               _index(lay, "B", left, 0), _index(lay, "B", 0, bottom),
-                               _index(lay, "LV", left[:-1], 0), _index(lay, "LH", 0, bottom - 1),
-                               [lay.slices["omega"].start]])
+    boundary = _boundary_columns(lay)
     bvec = ca.MX.sym("boundary", boundary.size)
     inputs, grid = [*lattice, rigid, bvec], None
     columns.append(boundary)
@@ -807,6 +803,18 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int) -> stencils.LocalJa
     return stencils.LocalJacobian([stencils.single("residuals", inputs, expr,
                                                    np.concatenate(columns), np.arange(n_r))],
                                   [], (n_r, lay.size))
+
+
+def _boundary_columns(lay: _Layout) -> np.ndarray:
+    """Indices in x of the boundary design vector of :func:`simultaneous` (its ``bvec``:
+    :meth:`BoundaryData.to_vector`'s order, then omega): the angles alpha and beta of the
+    left vertices and then the bottom ones, the left and the bottom sides, omega."""
+    N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
+    left, bottom = np.arange(N + 1), np.arange(1, M + 1)
+    angles = [np.concatenate([_index(lay, n, left, 0), _index(lay, n, 0, bottom)])
+              for n in ("A", "B")]
+    return np.concatenate([*angles, _index(lay, "LV", left[:-1], 0),
+                           _index(lay, "LH", 0, bottom - 1), [lay.slices["omega"].start]])
 
 
 def _index(lay: _Layout, name: str, i, j=0) -> np.ndarray:
@@ -1000,13 +1008,10 @@ class _ConstraintStencils:
     def _boundary_mv(self) -> None:
         """The boundary MV assignment (:meth:`Setup.boundary_mv`), on the boundary
         vertices' angles, left then bottom."""
-        N, M, ix = self.N, self.M, self._ix
-        nv = N + 1 + M
-        i = np.concatenate([np.arange(N + 1), np.zeros(M, int)])
-        j = np.concatenate([np.zeros(N + 1, int), np.arange(1, M + 1)])
+        nv = self.N + 1 + self.M
         a, b = ca.SX.sym("a", nv), ca.SX.sym("b", nv)
         mv, _, _ = self.setup.boundary_mv(a, b)
-        self._whole("mv", [a, b], mv, np.concatenate([ix("A", i, j), ix("B", i, j)]))
+        self._whole("mv", [a, b], mv, _boundary_columns(self.lay)[:2 * nv])
 
     def _sides(self, sides: np.ndarray, root: int) -> None:
         """Every side against min_length times the mean side (linear)."""
