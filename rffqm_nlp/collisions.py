@@ -31,6 +31,14 @@ Method.
   make every query large). A folding sheet's centres move
   nearly affinely over a short step, so the reaches are a fraction of a panel. Every gap
   is lowered, every bound raised, by a small slack (a bound on the rounding).
+  Near flat, though, a large sheet bends: one affine map misfits its displacements by
+  about the same length whatever the panels' size, so the reaches grow to many panels
+  (9 radii at 200 x 200 panels). From ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels
+  on, each tile gets its own fit (:func:`_local_pairs`): the bound above holds for any
+  affine map, so a pair (p, q) with p in a tile and both residuals measured against that
+  tile's fit needs g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate
+  when both the tile's and the global reaches allow it (a subset of the global candidates
+  that keeps every pair they must give).
 * Memory: no step's pairs are held at once. The tree queries give their pairs in chunks
   of about ``ROWS`` (the first block's count bounds it, each next block is sized from the
   last one's pairs per panel), a step's rows are refined along the motion as they come
@@ -109,6 +117,12 @@ SPREAD = 1.5
 
 #: Triangle pairs per vectorised batch of the narrow phase (bounds its memory).
 CHUNK = 4096
+
+#: Panels a side of the grid's tiles, each with its own affine fit of a coarse step's
+#: displacements in the broad phase (:func:`_local_pairs`), used from MIN_TILES tiles on
+#: (below, one query over the whole sheet costs less than a query per tile).
+TILE = 24
+MIN_TILES = 4
 
 PanelPair = tuple[tuple[int, int], tuple[int, int]]
 
@@ -261,6 +275,119 @@ def _kept(order: np.ndarray, R: np.ndarray, ij: np.ndarray, i: np.ndarray, j: np
     for k in range(0, len(p), ROWS):
         a, b = p[k:k + ROWS], q[k:k + ROWS]
         yield np.minimum(a, b), np.maximum(a, b), dist[k:k + ROWS]
+
+
+def _tiles(geo: _Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid's tiles of TILE x TILE panels: the tile of each panel (P,), the panels in
+    tile order (P,) and where each tile starts in that order (T,)."""
+    nj = -(-geo.M // TILE)
+    tile = (geo.ij[:, 0] // TILE) * nj + geo.ij[:, 1] // TILE
+    perm = np.argsort(tile, kind="stable")
+    starts = np.flatnonzero(np.r_[True, tile[perm][1:] != tile[perm][:-1]])
+    return tile, perm, starts
+
+
+def _tile_fits(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
+               clearance: float, tile: np.ndarray, perm: np.ndarray, starts: np.ndarray):
+    """:func:`_reach`'s fit on each tile's panels alone, all tiles at once: L (T,), A
+    (T, 3, 3), the mean centre and displacement (T, 3) and whether a fit with
+    (SAFETY + 1) L < 2 exists (T,). C, D (3, P), spin and r (P,) as :func:`_reach`'s."""
+    Cs, Ds = C.T[perm], D.T[perm]                                   # (P, 3) by tile
+    count = np.diff(np.r_[starts, len(perm)])
+    mc = np.add.reduceat(Cs, starts, axis=0) / count[:, None]
+    md = np.add.reduceat(Ds, starts, axis=0) / count[:, None]
+    t = tile[perm]
+    X, E = Cs - mc[t], Ds - md[t]
+    XX = np.add.reduceat(X[:, :, None] * X[:, None, :], starts, axis=0)   # (T, 3, 3)
+    EX = np.add.reduceat(E[:, :, None] * X[:, None, :], starts, axis=0)
+    lam, U = np.linalg.eigh(XX)
+    U, lam = U[:, :, ::-1], lam[:, ::-1]                            # largest first
+    rs, ss = r[perm], spin[perm]
+    bestA, bestL = np.zeros((len(starts), 3, 3)), np.zeros(len(starts))
+    best = np.full(len(starts), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for k in range(4):
+            Uk = U[:, :, :k]
+            A = (EX @ Uk / np.where(lam[:, None, :k] > 0, lam[:, None, :k], np.inf)) \
+                @ Uk.transpose(0, 2, 1)
+            L = np.linalg.norm(A, 2, axis=(1, 2)) if k else np.zeros(len(starts))
+            e = _norm(E - np.einsum("pij,pj->pi", A[t], X))
+            G = ((clearance + (SAFETY + 1) * (L[t] * rs + e) + SAFETY * ss)
+                 / (2 - (SAFETY + 1) * L[t]))
+            top = np.maximum.reduceat(rs + G, starts)
+            ok = np.isfinite(L) & ((SAFETY + 1) * L < 2) & np.isfinite(top) & (top < best)
+            best[ok], bestL[ok], bestA[ok] = top[ok], L[ok], A[ok]
+    return bestL, bestA, mc, md, np.isfinite(best)
+
+
+def _local_pairs(geo: _Geometry, C: np.ndarray, D: np.ndarray, spin: np.ndarray,
+                 Rg: np.ndarray, clearance: float, eps: float):
+    """The pairs of :func:`_close_pairs` (C.T, Rg, 2 eps) that are also within the reaches
+    of the affine fit of p's grid tile (:func:`_tile_fits`; both panels' residuals against
+    that one fit, which bounds |D_p - D_q| as the global fit does): a superset of the pairs
+    the step's filter keeps, found with far smaller queries where the sheet bends (one
+    affine map fits a tile's displacements far better than the whole sheet's). C, D (3, P),
+    spin (P,) as :func:`_reach`'s, Rg (P,) the radii plus the global reaches. In chunks
+    (p, q, dist) of at most ROWS pairs."""
+    r = geo.radius
+    tile, perm, starts = _tiles(geo)
+    L, A, mc, md, ok = _tile_fits(C, D, spin, r, clearance, tile, perm, starts)
+    Ct = np.ascontiguousarray(C.T)
+    e = _norm(D.T - md[tile] - np.einsum("pij,pj->pi", A[tile], Ct - mc[tile]))
+    Lt = L[tile]
+    own = np.where(ok[tile], r + (clearance + (SAFETY + 1) * (Lt * r + e) + SAFETY * spin)
+                   / (2 - (SAFETY + 1) * Lt), Rg)                   # reach in its own tile
+    slack = np.where(ok, 4 * eps / (2 - (SAFETY + 1) * L) + 2 * eps, 2 * eps)
+    groups = np.split(perm, starts[1:])
+    centre = np.stack([Ct[g].mean(axis=0) for g in groups])
+    rho = np.array([float(_norm(Ct[g] - c).max()) for g, c in zip(groups, centre)])
+    Rmax = np.array([float(Rg[g].max()) for g in groups])
+    lists = cKDTree(Ct).query_ball_point(centre, rho + Rmax + float(Rg.max()) + 4 * eps,
+                                         return_sorted=False)
+    out, held = [], 0
+    for T, g in enumerate(groups):
+        cand = np.asarray(lists[T], dtype=np.int64)
+        cand = cand[cand > g.min()]
+        if not cand.size:
+            continue
+        Rp = own[g]
+        if ok[T]:
+            eq = _norm(D.T[cand] - md[T] - (Ct[cand] - mc[T]) @ A[T].T)
+            Rq = r[cand] + ((clearance + (SAFETY + 1) * (L[T] * r[cand] + eq)
+                             + SAFETY * spin[cand]) / (2 - (SAFETY + 1) * L[T]))
+        else:
+            Rq = Rg[cand]
+        Rgq = Rg[cand]  # a pair must pass both: the tile's reaches and the global ones
+        near = _norm(Ct[cand] - centre[T]) <= rho[T] + np.minimum(
+            float(Rp.max()) + Rq + slack[T], Rmax[T] + Rgq + 2 * eps)
+        cand, Rq, Rgq = cand[near], Rq[near], Rgq[near]
+        if not cand.size:
+            continue
+        hits = cKDTree(Ct[g]).sparse_distance_matrix(
+            cKDTree(Ct[cand]), min(float(Rp.max() + Rq.max() + slack[T]),
+                                   float(Rmax[T] + Rgq.max() + 2 * eps)), output_type="ndarray")
+        i, j, dist = hits["i"], hits["j"], hits["v"]
+        p, q = g[i], cand[j]
+        k = np.flatnonzero((q > p) & (dist <= Rp[i] + Rq[j] + slack[T])
+                           & (dist <= Rg[p] + Rg[q] + 2 * eps))
+        p, q, dist = p[k], q[k], dist[k]
+        k = np.flatnonzero(np.maximum(np.abs(geo.ij[p, 0] - geo.ij[q, 0]),
+                                      np.abs(geo.ij[p, 1] - geo.ij[q, 1])) >= 2)
+        out.append((p[k], q[k], dist[k]))
+        held += len(k)
+        if held >= ROWS:
+            yield from _in_chunks(out)
+            out, held = [], 0
+    yield from _in_chunks(out)
+
+
+def _in_chunks(found: list[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+    """The pairs (p, q, dist) of ``found`` joined and cut into chunks of at most ROWS."""
+    if not found:
+        return
+    p, q, dist = (np.concatenate(x) for x in zip(*found))
+    for k in range(0, len(p), ROWS):
+        yield p[k:k + ROWS], q[k:k + ROWS], dist[k:k + ROWS]
 
 
 def _slack(geo: _Geometry, C: np.ndarray) -> float:
@@ -717,7 +844,10 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
     G = _reach(C, D, spin, geo.radius, clearance)
     eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())
     Y = np.concatenate([Tb[12:15], geo.radius[None], D, spin[None]])  # (8, P)
-    for p, q, dist in _close_pairs(geo, C.T, geo.radius + G, 2 * eps):
+    pairs = (_local_pairs(geo, C, D, spin, geo.radius + G, clearance, eps)
+             if len(_tiles(geo)[2]) >= MIN_TILES
+             else _close_pairs(geo, C.T, geo.radius + G, 2 * eps))
+    for p, q, dist in pairs:
         A, B = Y.take(p, axis=1), Y.take(q, axis=1)                  # (8, n)
         m = SAFETY * (_shift(A, B, 4) + A[7] + B[7])
         g0 = dist - A[3] - B[3]

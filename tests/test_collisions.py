@@ -441,3 +441,31 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
     assert chunked == whole and not whole.free
     assert max(chunks) <= 8 and max(batches) <= 2 * 8
     assert len(chunks) > 3 * int(np.ceil(omega_max / collisions_module.MAX_STEP))
+
+
+@pytest.mark.parametrize("make, seed, clearance, omega_max, tile", [
+    (random_recipe, 29, 0.0, 2.5, 3), (random_recipe, 16, 0.05, 2.4, 2),   # very unequal
+    (perturbed_miura, 0, 0.4, 3.0, 2), (perturbed_miura, 1, 0.2, 3.0, 5)])  # similar panels
+def test_tile_fits_give_the_rows_of_the_global_fit(make, seed, clearance, omega_max, tile,
+                                                  monkeypatch):
+    """The broad phase by grid tiles (each with its own affine fit, _local_pairs) keeps
+    exactly the rows and bounds of every coarse step that the one global fit keeps
+    (_close_pairs), and the report is the same."""
+    pat = make(seed)
+    geo = _Geometry(pat)
+    omegas = np.linspace(0.0, omega_max, 8)
+
+    def rows_and_report(min_tiles: int):
+        monkeypatch.setattr(collisions_module, "MIN_TILES", min_tiles)
+        rows, m = coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), clearance)
+        order = np.lexsort(rows.T[::-1])
+        return rows[order], m[order], collisions(pat, omega_max, clearance=clearance)
+
+    monkeypatch.setattr(collisions_module, "TILE", tile)
+    assert len(collisions_module._tiles(geo)[2]) >= 4
+    rows, m, report = rows_and_report(1)
+    global_rows, global_m, global_report = rows_and_report(10 ** 9)
+    assert len(global_rows) > 0
+    np.testing.assert_array_equal(rows, global_rows)
+    np.testing.assert_array_equal(m, global_m)
+    assert report == global_report
