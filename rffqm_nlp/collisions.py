@@ -33,7 +33,7 @@ Method.
   is lowered, every bound raised, by a small slack (a bound on the rounding).
   Near flat, though, a large sheet bends: one affine map misfits its displacements by
   about the same length whatever the panels' size, so the reaches grow to many panels
-  (9 radii at 200 x 200 panels). From ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels
+  (docs/collisions.md). From ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels
   on, each tile gets its own fit (:func:`_local_pairs`): the bound above holds for any
   affine map, so a pair (p, q) with p in a tile and both residuals measured against that
   tile's fit needs g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate
