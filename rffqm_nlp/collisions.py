@@ -835,7 +835,7 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
     SAFETY times the centres' relative displacement plus each panel's largest vertex
     displacement about its centre (at least :func:`_motion`'s). In chunks (rows, m) of at
     most ROWS pairs, from the tree queries of :func:`_close_pairs` with the panels'
-    reaches of :func:`_reach`."""
+    reaches of :func:`_reach`, or from MIN_TILES tiles on of :func:`_local_pairs`."""
     Ta, Tb = st.T[a], st.T[a + 1]
     P = geo.N * geo.M
     C, D = Ta[12:15], Tb[12:15] - Ta[12:15]                          # (3, P)
