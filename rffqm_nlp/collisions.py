@@ -312,31 +312,29 @@ def _tile_fits(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
                 @ Uk.transpose(0, 2, 1)
             L = np.linalg.norm(A, 2, axis=(1, 2)) if k else np.zeros(len(starts))
             e = _norm(E - np.einsum("pij,pj->pi", A[t], X))
-            G = ((clearance + (SAFETY + 1) * (L[t] * rs + e) + SAFETY * ss)
-                 / (2 - (SAFETY + 1) * L[t]))
+            G = _fit_reach(L[t], rs, e, ss, clearance)
             top = np.maximum.reduceat(rs + G, starts)
             ok = np.isfinite(L) & ((SAFETY + 1) * L < 2) & np.isfinite(top) & (top < best)
             best[ok], bestL[ok], bestA[ok] = top[ok], L[ok], A[ok]
     return bestL, bestA, mc, md, np.isfinite(best)
 
 
-def _local_pairs(geo: _Geometry, C: np.ndarray, D: np.ndarray, spin: np.ndarray,
-                 Rg: np.ndarray, clearance: float, eps: float):
+def _local_pairs(geo: _Geometry, tiles: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 C: np.ndarray, D: np.ndarray, spin: np.ndarray, Rg: np.ndarray,
+                 clearance: float, eps: float):
     """The pairs of :func:`_close_pairs` (C.T, Rg, 2 eps) that are also within the reaches
     of the affine fit of p's grid tile (:func:`_tile_fits`; both panels' residuals against
     that one fit, which bounds |D_p - D_q| as the global fit does): a superset of the pairs
     the step's filter keeps, found with far smaller queries where the sheet bends (one
     affine map fits a tile's displacements far better than the whole sheet's). C, D (3, P),
-    spin (P,) as :func:`_reach`'s, Rg (P,) the radii plus the global reaches. In chunks
-    (p, q, dist) of at most ROWS pairs."""
+    spin (P,) as :func:`_reach`'s, Rg (P,) the radii plus the global reaches, ``tiles``
+    those of :func:`_tiles`. In chunks (p, q, dist) of at most ROWS pairs."""
     r = geo.radius
-    tile, perm, starts = _tiles(geo)
+    tile, perm, starts = tiles
     L, A, mc, md, ok = _tile_fits(C, D, spin, r, clearance, tile, perm, starts)
     Ct = np.ascontiguousarray(C.T)
     e = _norm(D.T - md[tile] - np.einsum("pij,pj->pi", A[tile], Ct - mc[tile]))
-    Lt = L[tile]
-    own = np.where(ok[tile], r + (clearance + (SAFETY + 1) * (Lt * r + e) + SAFETY * spin)
-                   / (2 - (SAFETY + 1) * Lt), Rg)                   # reach in its own tile
+    own = np.where(ok[tile], r + _fit_reach(L[tile], r, e, spin, clearance), Rg)
     slack = np.where(ok, 4 * eps / (2 - (SAFETY + 1) * L) + 2 * eps, 2 * eps)
     groups = np.split(perm, starts[1:])
     centre = np.stack([Ct[g].mean(axis=0) for g in groups])
@@ -353,8 +351,7 @@ def _local_pairs(geo: _Geometry, C: np.ndarray, D: np.ndarray, spin: np.ndarray,
         Rp = own[g]
         if ok[T]:
             eq = _norm(D.T[cand] - md[T] - (Ct[cand] - mc[T]) @ A[T].T)
-            Rq = r[cand] + ((clearance + (SAFETY + 1) * (L[T] * r[cand] + eq)
-                             + SAFETY * spin[cand]) / (2 - (SAFETY + 1) * L[T]))
+            Rq = r[cand] + _fit_reach(L[T], r[cand], eq, spin[cand], clearance)
         else:
             Rq = Rg[cand]
         Rgq = Rg[cand]  # a pair must pass both: the tile's reaches and the global ones
@@ -844,8 +841,9 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
     G = _reach(C, D, spin, geo.radius, clearance)
     eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())
     Y = np.concatenate([Tb[12:15], geo.radius[None], D, spin[None]])  # (8, P)
-    pairs = (_local_pairs(geo, C, D, spin, geo.radius + G, clearance, eps)
-             if len(_tiles(geo)[2]) >= MIN_TILES
+    tiles = _tiles(geo)
+    pairs = (_local_pairs(geo, tiles, C, D, spin, geo.radius + G, clearance, eps)
+             if len(tiles[2]) >= MIN_TILES
              else _close_pairs(geo, C.T, geo.radius + G, 2 * eps))
     for p, q, dist in pairs:
         A, B = Y.take(p, axis=1), Y.take(q, axis=1)                  # (8, n)
@@ -855,6 +853,13 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
         rows = np.stack([np.full(len(kept), a), np.full(len(kept), a + 1), p[kept], q[kept]],
                         axis=1)
         yield rows, m[kept] + eps
+
+
+def _fit_reach(L, r: np.ndarray, e: np.ndarray, spin: np.ndarray,
+               clearance: float) -> np.ndarray:
+    """The reaches G of panels with radii r, residuals e and spins (each (n,)) against an
+    affine fit of spectral norm L (a float, or (n,) per panel): :func:`_reach`'s bound."""
+    return (clearance + (SAFETY + 1) * (L * r + e) + SAFETY * spin) / (2 - (SAFETY + 1) * L)
 
 
 def _reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
@@ -881,8 +886,7 @@ def _reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
         L = float(np.linalg.norm(A, 2))
         if (SAFETY + 1) * L >= 2:
             continue
-        e = _norm((E - A @ X).T)
-        G = (clearance + (SAFETY + 1) * (L * r + e) + SAFETY * spin) / (2 - (SAFETY + 1) * L)
+        G = _fit_reach(L, r, _norm((E - A @ X).T), spin, clearance)
         if best is None or (r + G).max() < (r + best).max():
             best = G
     return best
