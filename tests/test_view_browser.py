@@ -40,6 +40,15 @@ def x_of(page, trace: int) -> list:
     return page.evaluate(f"Array.from({GD}.data[{trace}].x)")
 
 
+def wait_for_x(page, trace: int, want: list) -> None:
+    """Wait until trace ``trace``'s x is ``want``: the slider's active index is set before
+    its restyle has redrawn the data."""
+    page.wait_for_function(
+        f"([t, want]) => {{ const x = Array.from({GD}.data[t].x); "
+        "return x.length === want.length && x.every((v, i) => v === want[i]); }",
+        arg=[trace, want], timeout=LOAD_MS)
+
+
 def click_step(page, index: int, count: int) -> None:
     """Click the slider rail above step ``index`` of ``count`` (its tick)."""
     ticks = page.locator(".slider-tick-rect")
@@ -82,12 +91,14 @@ def test_page_offline_and_slider_moves_geometry(browser, tmp_path):
 
     click_step(page, 0, len(steps))
     page.wait_for_function(f"{GD}._fullLayout.sliders[0].active === 0", timeout=LOAD_MS)
+    wait_for_x(page, 0, steps[0]["args"][0]["x"][0])
     assert x_of(page, 0) == steps[0]["args"][0]["x"][0] != steps[designed]["args"][0]["x"][0]
     assert x_of(page, 1) == steps[0]["args"][0]["x"][1]
 
     click_step(page, designed, len(steps))
     page.wait_for_function(f"{GD}._fullLayout.sliders[0].active === {designed}",
                            timeout=LOAD_MS)
+    wait_for_x(page, 0, steps[designed]["args"][0]["x"][0])
     assert x_of(page, 0) == steps[designed]["args"][0]["x"][0]
 
     button = page.locator(".updatemenu-button").first
