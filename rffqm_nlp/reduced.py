@@ -27,10 +27,12 @@ Each iteration solves the damped, linearised problem
 
     min_dd 0.5 |r + J dd|^2 + 0.5 dd' B dd + 0.5 lam dd' M dd   s.t. the inequalities, linearised,
 
-as a small dense QP (DAQP; only the rows the unconstrained step would break, and their
-neighbours in slack, enter it), re-marches d + dd and accepts it if the loss falls and every
-constraint holds; a step that breaks a constraint is corrected (the rows shifted by their
-linearisation error, up to :data:`CORRECTIONS` times) before lam grows. lam follows
+as a small dense QP (only the rows the unconstrained step would break, and their
+neighbours in slack, enter it; DAQP solves it as a least-distance problem in R dd, R the
+Cholesky factor of the damped model that the unconstrained step computed), re-marches
+d + dd and accepts it if the loss falls and every constraint holds; a step that breaks a
+constraint is corrected (the rows shifted by their linearisation error, up to
+:data:`CORRECTIONS` times) before lam grows. lam follows
 Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least squares
 problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D_d plus
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
@@ -53,7 +55,7 @@ to max(1, |J' r at the start| / 100) as IPOPT's gradient-based scaling of the ob
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import casadi as ca
@@ -616,7 +618,8 @@ class _Model:
     reduced Jacobian, n_r x n_d, never formed), H = JtJ + B, the metric M (n_d, n_d), the
     gradient Jr' r (n_d,), and its inequalities: rows = g's inequality rows, then the
     bounded design, then the bounded state variables, each with its bounds minus its
-    current value."""
+    current value; ``known``: the rows of A (n_d,) by index swept back so far
+    (:meth:`_Steps.rows`)."""
 
     JtJ: np.ndarray
     H: np.ndarray
@@ -625,6 +628,7 @@ class _Model:
     lin: _Linearization
     lower: np.ndarray  # bounds minus current values: lower <= A dd <= upper
     upper: np.ndarray
+    known: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 def _model(man: Manifold, p: _Point, lin: _Linearization) -> _Model:
@@ -660,6 +664,14 @@ class _Steps:
                                dd[self.man.bounded_design], ds[self.man.bounded_state]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
+        """The dense rows ``which`` of A (which.size, n_d), each swept back once per model
+        (the QP rounds, the optimality test and the secant update ask for the same rows)."""
+        new = np.array([i for i in which.tolist() if i not in m.known], dtype=np.int64)
+        if new.size:
+            m.known.update(zip(new.tolist(), self._swept(m, new)))
+        return np.array([m.known[i] for i in which.tolist()]).reshape(which.size, -1)
+
+    def _swept(self, m: _Model, which: np.ndarray) -> np.ndarray:
         """The dense rows ``which`` of A (which.size, n_d): a state row's part by the
         adjoint sweep, a block of rows at a time (:data:`BLOCK`)."""
         man, lin = self.man, m.lin
@@ -682,11 +694,11 @@ class _Steps:
         return A
 
     def __call__(self, m: _Model, lam: float, shift: np.ndarray) -> _Step | None:
-        H = m.H + lam * m.M
         try:
-            dd = la.cho_solve(la.cho_factor(H), -m.grad)
+            factor = la.cho_factor(m.H + lam * m.M, lower=False)
         except la.LinAlgError:  # B made the damped model indefinite
             return None
+        dd = la.cho_solve(factor, -m.grad)
         lower, upper = m.lower + shift, m.upper - shift
         work = shift > 0
         none = np.zeros(0, dtype=np.int64)
@@ -699,24 +711,32 @@ class _Steps:
                 return step
             work |= broken | (lower > -2 * np.abs(Ad)) | (upper < 2 * np.abs(Ad))
             which = np.flatnonzero(work)
-            qp = self._qp(which.size)
-            sol = qp(h=H, g=m.grad, a=self.rows(m, which), lba=np.maximum(lower[which], -1e20),
-                     uba=np.minimum(upper[which], 1e20))
-            if not qp.stats()["success"]:
+            step = self._qp(factor[0], m.grad, which, self.rows(m, which),
+                            np.maximum(lower[which], -1e20), np.minimum(upper[which], 1e20))
+            if step is None:
                 return None
-            step = _Step(dd=sol["x"].full().ravel(), which=which,
-                         multipliers=sol["lam_a"].full().ravel())
             solved = work.copy()
         return None
 
-    def _qp(self, rows: int) -> ca.Function:
-        if rows not in self._qps:
-            n = self.man.design.size
-            self._qps[rows] = ca.conic("step", "daqp", {"h": ca.Sparsity.dense(n, n),
-                                                        "a": ca.Sparsity.dense(rows, n)},
-                                       {"error_on_fail": False,
-                                        "daqp": {"primal_tol": 0.1 * FEASIBLE}})
-        return self._qps[rows]
+    def _qp(self, R: np.ndarray, grad: np.ndarray, which: np.ndarray, A: np.ndarray,
+            lba: np.ndarray, uba: np.ndarray) -> _Step | None:
+        """min 0.5 dd' H dd + grad' dd s.t. lba <= A dd <= uba (A: (k, n_d)), given H = R' R
+        (R: ``cho_factor``'s upper factor; only its upper triangle is read), as the
+        least-distance problem in z = R dd that DAQP solves without factoring H again:
+        min 0.5 |z|^2 + (R^-T grad)' z s.t. lba <= (A R^-1) z <= uba, whose multipliers are
+        the QP's."""
+        n = R.shape[0]
+        if which.size not in self._qps:
+            self._qps[which.size] = ca.conic(
+                "step", "daqp", {"h": ca.Sparsity.diag(n), "a": ca.Sparsity.dense(which.size, n)},
+                {"error_on_fail": False, "daqp": {"primal_tol": 0.1 * FEASIBLE}})
+        qp = self._qps[which.size]
+        sol = qp(h=ca.DM.eye(n), g=la.solve_triangular(R, grad, trans="T"),
+                 a=la.solve_triangular(R, A.T, trans="T").T, lba=lba, uba=uba)
+        if not qp.stats()["success"]:
+            return None
+        return _Step(dd=la.solve_triangular(R, sol["x"].full().ravel()), which=which,
+                     multipliers=sol["lam_a"].full().ravel())
 
 
 def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:

@@ -16,9 +16,11 @@ A second table solves the bundled targets in the free mode with the Tikhonov wei
 grid (``transcription.GRID_REGULARIZATION``, a fraction of the "regularization" weight) at
 three values, the middle one the package's. A third measures the cost per iteration against
 size: the sphere cap at 20, 40 and 60 panels a side, four iterations of the default solver
-in each mode (build and solve time).
+in each mode (build and solve time), each in a fresh process; with ``--previous REV`` the
+code at that git revision runs the same right after, and the table gives the ratio.
 
-    .venv/bin/python studies/correspondence_choice.py [--panels 20] [--out studies/results]
+    .venv/bin/python studies/correspondence_choice.py [--panels 20] [--previous REV]
+        [--out studies/results]
     .venv/bin/python studies/correspondence_choice.py --smoke   (sphere_cap, 8 x 8 panels,
         no mesh target, temporary output)
 """
@@ -37,7 +39,8 @@ import numpy as np
 
 import rffqm_nlp as rq
 from bench_mesh_targets import grid_obj
-from common import RESULTS, TARGETS, Run, add_smoke, fmt, smoke_dir, target_problem, write_table
+from common import (RESULTS, ROOT, TARGETS, Run, add_smoke, export_package, fmt, smoke_dir,
+                    solve_in_child, target_problem, write_table)
 from rffqm_nlp import transcription
 
 MODES = ("lattice", "free")
@@ -77,24 +80,27 @@ def solve(label: str, problem: rq.DesignProblem, options: rq.SolveOptions) -> di
             "min_step": grid_steps(problem, result)}
 
 
-def iteration_cost(n: int, mode: str) -> dict:
-    """ITERATIONS iterations of the sphere cap at n x n panels: build and solve seconds."""
-    problem, options = target_problem("sphere_cap", n, correspondence=mode)
-    try:
-        stats = problem.solve(options, max_iter=ITERATIONS).stats
-    except rq.SolverFailed as exc:  # Maximum_Iterations_Exceeded, as asked
-        stats = exc.stats
-    return {"n": n, "mode": mode, "iterations": stats.iterations, "build": stats.build_time,
-            "solve": stats.solve_time}
+def iteration_cost(n: int, mode: str, code: str, package: Path) -> dict:
+    """ITERATIONS iterations of the sphere cap at n x n panels in a fresh process importing
+    the package from ``package``: build and solve seconds per iteration."""
+    row = solve_in_child("sphere_cap", n, design={"correspondence": mode},
+                         solve={"max_iter": ITERATIONS}, env={"PYTHONPATH": str(package)})
+    its = max(row["iterations"] or 0, 1)  # Maximum_Iterations_Exceeded, as asked
+    return {"n": n, "mode": mode, "code": code, "iterations": row["iterations"],
+            "build": row["build_time"], "solve": row["solve_time"],
+            "per_iteration": row["solve_time"] / its}
 
 
 def cost_table(rows: list[dict]) -> str:
     lines = ["", f"## Cost per iteration against size (sphere_cap, {ITERATIONS} iterations)",
-             "", "| panels | mode | iterations | build (s) | solve (s) | solve per iteration (s) |",
-             "|---|---|---|---|---|---|"]
+             "", "| panels | mode | code | iterations | build (s) | solve (s) | "
+             "solve per iteration (s) | per iteration / previous |", "|---|---|---|---|---|---|---|---|"]
+    this = {(r["n"], r["mode"]): r["per_iteration"] for r in rows if r["code"] == "this"}
     for r in rows:
-        lines.append(f"| {r['n']} | {r['mode']} | {r['iterations']} | {r['build']:.1f} | "
-                     f"{r['solve']:.1f} | {r['solve'] / max(r['iterations'], 1):.2f} |")
+        ratio = (None if r["code"] == "this" else this[(r["n"], r["mode"])] / r["per_iteration"])
+        lines.append(f"| {r['n']} | {r['mode']} | {r['code']} | {r['iterations']} | "
+                     f"{r['build']:.1f} | {r['solve']:.1f} | {r['per_iteration']:.2f} | "
+                     f"{fmt(ratio, '.2f')} |")
     return "\n".join(lines) + "\n"
 
 
@@ -154,6 +160,8 @@ def weight_table(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--panels", type=int, default=20)
+    parser.add_argument("--previous", default=None,
+                        help="a git revision whose cost per iteration is measured too")
     parser.add_argument("--out", type=Path, default=RESULTS)
     add_smoke(parser)
     args = parser.parse_args(argv)
@@ -179,7 +187,11 @@ def main(argv: list[str] | None = None) -> None:
                 print(weights[-1], file=sys.stderr, flush=True)
     finally:
         transcription.GRID_REGULARIZATION = base
-    costs = [iteration_cost(size, mode) for size in sizes for mode in MODES]
+    codes = {"this": ROOT}
+    if args.previous and sizes:
+        codes[f"previous ({args.previous})"] = export_package(args.previous)
+    costs = [iteration_cost(size, mode, code, package)
+             for size in sizes for mode in MODES for code, package in codes.items()]
     text = (main_table(rows, run, n) + (weight_table(weights) if weights else "")
             + (cost_table(costs) if costs else ""))
     write_table(out / "correspondence_choice.md", text)

@@ -135,6 +135,9 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
                    np.eye(man.design.size)[man.bounded_design], S[man.bounded_state]])
     assert ng + nbd + man.bounded_state.size == A.shape[0]
     close(steps.rows(m, which), A[which])
+    again = np.concatenate([which[::-2], rng.choice(m.lower.size, 10, replace=False)])
+    close(steps.rows(m, again), A[again])  # partly from the model's rows known so far
+    assert set(m.known) == set(which) | set(again)
     dd = rng.standard_normal(man.design.size)
     close(steps.change(m, dd), A @ dd)
     assert man._window.pool < man.state.size
@@ -287,3 +290,31 @@ def test_a_solver_ending_in_nan_raises_solver_failed_never_a_result(monkeypatch)
     with pytest.raises(rq.SolverFailed, match="NaN or inf in the design vector") as exc:
         prob.solve(opts)
     assert exc.value.status == "non_finite" and exc.value.stats.status == "Fit_Reached"
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), rows=st.integers(1, 60), n=st.integers(2, 40))
+def test_step_qp_meets_its_optimality_conditions(manifold, seed, rows, n):
+    """The step's QP in least-distance form returns the solution and multipliers of
+    min 0.5 dd' H dd + g' dd s.t. lba <= A dd <= uba: H dd + g + A' y = 0, every row within
+    its bounds, y <= 0 only at a lower bound and y >= 0 only at an upper one (CasADi's
+    sign). Random problems, feasible by construction (each row a one-sided bound that a
+    random point keeps), the unconstrained minimiser breaking every row."""
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, n))
+    H = X @ X.T + 0.1 * np.eye(n)
+    g, A = rng.standard_normal(n), rng.standard_normal((rows, n))
+    kept, free = A @ rng.standard_normal(n), A @ np.linalg.solve(H, -g)
+    below = free < kept  # the unconstrained step breaks a lower bound at the kept value
+    lba = np.where(below, kept, -1e20)
+    uba = np.where(below, 1e20, kept)
+    R = np.linalg.cholesky(H).T
+    step = reduced._Steps(manifold[1])._qp(R, g, np.arange(rows), A, lba, uba)
+    dd, y = step.dd, step.multipliers
+    scale = 1 + np.abs(g).max() + np.abs(A.T @ y).max()
+    assert np.abs(H @ dd + g + A.T @ y).max() < 1e-9 * scale
+    Ad = A @ dd
+    assert np.all(Ad >= lba - 1e-9 * scale) and np.all(Ad <= uba + 1e-9 * scale)
+    assert np.all(-y[y < 0] * (Ad - lba)[y < 0] < 1e-9 * scale)
+    assert np.all(y[y > 0] * (uba - Ad)[y > 0] < 1e-9 * scale)
+    assert np.any(np.abs(y) > 1e-9)  # some row binds
