@@ -94,7 +94,7 @@ def iteration_cost(n: int, mode: str, code: str, package: Path) -> dict:
 def cost_table(rows: list[dict]) -> str:
     lines = ["", f"## Cost per iteration against size (sphere_cap, {ITERATIONS} iterations)",
              "", "| panels | mode | code | iterations | build (s) | solve (s) | "
-             "solve per iteration (s) | per iteration / previous |", "|---|---|---|---|---|---|---|---|"]
+             "solve per iteration (s) | this / previous, per iteration |", "|---|---|---|---|---|---|---|---|"]
     this = {(r["n"], r["mode"]): r["per_iteration"] for r in rows if r["code"] == "this"}
     for r in rows:
         ratio = (None if r["code"] == "this" else this[(r["n"], r["mode"])] / r["per_iteration"])
