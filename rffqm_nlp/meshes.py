@@ -8,20 +8,33 @@ A designer's shape becomes a smooth parametric surface r(u, v) in four steps
    or a file with vertices and no faces). Vertices are merged; degenerate and duplicate
    faces dropped. A mesh must be one connected patch of disk topology (one component,
    manifold, exactly one boundary loop, Euler characteristic 1).
-2. **Parametrize.** If the mesh is a graph over its best-fit plane (every face normal within
-   :data:`GRAPH_ANGLE` of the plane's normal and no triangle flipped in the projection),
-   (u, v) are the in-plane coordinates; faces covering at most :data:`SLIVER_AREA` of the
-   area may break these two rules (slivers). Otherwise a least-squares
-   conformal map (LSCM, sparse least squares, two boundary vertices pinned), or where that
-   flips a triangle, Tutte's uniform-weight map onto a circle (injective by construction);
-   then scaled to the mesh's area. A point cloud is projected onto its best-fit plane.
-   Either way the parameter image is rotated so that its smallest bounding rectangle is
-   axis-aligned (:func:`align`).
-3. **Domain.** The largest axis-aligned rectangle whose raster nodes (a
-   :data:`RASTER` x :data:`RASTER` grid over the parameter image's bounding box, eroded by
-   one node) all lie inside the parameter image, so the mesh covers the whole domain.
+2. **Parametrize.** A patch with four corners (:func:`corners`: exactly four places where
+   the boundary turns left by at least pi - :data:`CORNER_ANGLE`) is mapped conformally onto a rectangle
+   (:func:`conformal_rectangle`): u harmonic (cotangent weights) with u = 0 and 1 on two
+   opposite sides and no flux through the other two, v likewise on the other pair, the
+   rectangle's aspect ratio sqrt(E_u / E_v) from their Dirichlet energies, its area the
+   mesh's; used when no triangle flips. Otherwise, if the mesh is a graph over its best-fit
+   plane (every face normal within :data:`GRAPH_ANGLE` of the plane's normal and no triangle
+   flipped in the projection), (u, v) are the in-plane coordinates; faces covering at most
+   :data:`SLIVER_AREA` of the area may break these two rules (slivers). Otherwise a
+   least-squares conformal map (LSCM, sparse least squares, two boundary vertices pinned),
+   or where that flips a triangle, Tutte's uniform-weight map onto a circle (injective by
+   construction); then scaled to the mesh's area. A point cloud is projected onto its
+   best-fit plane and a first spline fitted there (step 4); its points, moved onto that
+   smooth surface and triangulated in the plane (Delaunay, the long triangles of
+   :func:`_cloud_faces` dropped), take the conformal rectangle when that triangulation is a
+   disk with four corners, else the projection. Either way the parameter image is rotated so that its smallest bounding
+   rectangle is axis-aligned (:func:`align`).
+3. **Domain.** The rectangle itself for a conformal rectangle (a point cloud's inset by
+   :data:`CLOUD_INSET` point spacings, where the spline would follow the noise of the
+   boundary points); otherwise the largest
+   axis-aligned rectangle whose raster nodes (a :data:`RASTER` x :data:`RASTER` grid over the
+   parameter image's bounding box, eroded by one node) all lie inside the parameter image,
+   so the mesh covers the whole domain.
 4. **Spline.** A tensor-product cubic B-spline on uniform knots over the parameter image's
-   bounding box, fitted to the parametrized vertices by penalised least squares
+   bounding box, fitted to the parametrized vertices (a point cloud with a conformal
+   rectangle: its points on the first, denoised spline, fitted like a mesh's vertices) by
+   penalised least squares
    (P-spline): minimise sum_k |s(u_k, v_k) - p_k|^2 + lambda (n / n_c) (|D_u c|^2 + |D_v c|^2)
    over the control points c, with D_u, D_v the second differences of c along u and v,
    n the number of vertices and n_c the number of control points. lambda is
@@ -68,6 +81,12 @@ GRAPH_ANGLE = math.radians(80.0)
 #: Largest area fraction of a mesh's faces that may be steep or flipped in a projection or
 #: a conformal map (slivers that CAD exports and Delaunay triangulations carry).
 SLIVER_AREA = 1e-4
+#: Largest angle (radians) between a boundary vertex's chords to its neighbours
+#: :data:`CORNER_WINDOW` away for a corner of the patch (a rectangle's corner: pi / 2, a
+#: straight side: pi, a circle: pi - 4 pi CORNER_WINDOW).
+CORNER_ANGLE = math.radians(155.0)
+#: The chords' reach, as a share of the boundary's vertices (:func:`corners`).
+CORNER_WINDOW = 0.02
 #: Largest spline deviation from the vertices, over the diameter (max for meshes, RMS for
 #: point clouds).
 MAX_DEVIATION = 0.01
@@ -79,6 +98,9 @@ MIN_POINTS = 20
 #: P-spline penalty weight lambda for meshes and for point clouds (module docstring).
 MESH_SMOOTHING = 1e-4
 CLOUD_SMOOTHING = 0.01
+#: A point cloud's rectangle domain stays this many point spacings (sqrt(area / points))
+#: inside the rectangle, off the noisy boundary points.
+CLOUD_INSET = 1.0
 #: Vertices (meshes) or points (clouds) per knot cell when choosing the number of knots.
 MESH_POINTS_PER_CELL = 4
 CLOUD_POINTS_PER_CELL = 16
@@ -101,8 +123,9 @@ class Mesh(Surface):
 
     Attributes: ``path`` (or None), ``mesh`` (the cleaned ``trimesh.Trimesh``, None for a
     point cloud), ``points`` (n, 3) the vertices or cloud points, ``uv`` (n, 2) their
-    parameters, ``parametrization`` ("projection", "lscm", "tutte"), ``knots`` (n_u, n_v),
-    ``smoothing``, ``deviation_max`` and ``deviation_rms`` (over the diameter).
+    parameters, ``parametrization`` ("rectangle", "projection", "lscm", "tutte"), ``knots``
+    (n_u, n_v) of r's spline, ``smoothing`` (of the cloud's denoising fit for a point cloud
+    with a conformal rectangle), ``deviation_max`` and ``deviation_rms`` (over the diameter).
     """
 
     def __init__(self, source: Any, *, name: str | None = None,
@@ -116,22 +139,37 @@ class Mesh(Surface):
         what = str(self.path) if self.path is not None else "the mesh"
         self.mesh, points = _load(source, what)
         cloud = self.mesh is None
+        self.smoothing = fit_smoothing = smoothing or (CLOUD_SMOOTHING if cloud
+                                                       else MESH_SMOOTHING)
         if not cloud:
             _check_disk(self.mesh, what)
-            self.points = np.asarray(self.mesh.vertices, dtype=float)
+            self.points = fitted = np.asarray(self.mesh.vertices, dtype=float)
             self.uv, self.parametrization = parametrize(self.mesh)
             inside = _polygon_mask(self.uv[_boundary_loop(self.mesh)])
+            self.knots = knots or _knot_spans(self.uv, MESH_POINTS_PER_CELL)
         else:
             what = what if self.path is not None else "the point cloud"
-            self.points = points
+            self.points = fitted = points
             uv, self._plane_normal = _project(points)
-            self.uv, self.parametrization = align(uv), "projection"
-            inside = _cloud_mask(self.uv)
-        self.smoothing = smoothing or (CLOUD_SMOOTHING if cloud else MESH_SMOOTHING)
-        self.knots = knots or _knot_spans(
-            self.uv, CLOUD_POINTS_PER_CELL if cloud else MESH_POINTS_PER_CELL)
-        domain = inscribed_rectangle(self.uv, inside)
-        self._spline = _fit_spline(self.uv, self.points, self.knots, self.smoothing)
+            self.knots = knots or _knot_spans(uv, CLOUD_POINTS_PER_CELL)
+            on_surface = _smoothed(uv, points, self.knots, self.smoothing)[:len(uv)]
+            rectangle = _cloud_rectangle(on_surface, uv)
+            if rectangle is None:
+                self.uv, self.parametrization = align(uv), "projection"
+                inside = _cloud_mask(self.uv)
+            else:  # the denoised surface in the new parameters: fitted like a mesh
+                self.uv, self.parametrization = align(rectangle), "rectangle"
+                fitted, fit_smoothing = on_surface, MESH_SMOOTHING
+                self.knots = knots or _knot_spans(self.uv, MESH_POINTS_PER_CELL)
+        if self.parametrization == "rectangle":
+            lo, hi = self.uv.min(axis=0), self.uv.max(axis=0)
+            if cloud:  # the noisy boundary points' spacings stay outside
+                inset = CLOUD_INSET * math.sqrt(np.prod(hi - lo) / len(self.uv))
+                lo, hi = lo + inset, hi - inset
+            domain = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])))
+        else:
+            domain = inscribed_rectangle(self.uv, inside)
+        self._spline = _fit_spline(self.uv, fitted, self.knots, fit_smoothing)
         super().__init__(name or (self.path.stem if self.path else "mesh"), {}, domain)
         self._check_deviation(what, cloud)
         if cloud:
@@ -394,9 +432,13 @@ def _project(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parametrize(mesh: trimesh.Trimesh) -> tuple[np.ndarray, str]:
-    """(uv (n, 2), method) for a disk-topology mesh with consistent winding: the projection
-    onto the best-fit plane if the mesh is a graph over it, else LSCM, else Tutte's map
-    (module docstring). Orientation: r_u x r_v agrees with the faces' normals."""
+    """(uv (n, 2), method) for a disk-topology mesh with consistent winding: the conformal
+    map onto a rectangle if the patch has four corners, else the projection onto the
+    best-fit plane if the mesh is a graph over it, else LSCM, else Tutte's map (module
+    docstring). Orientation: r_u x r_v agrees with the faces' normals."""
+    rectangle = conformal_rectangle(mesh)
+    if rectangle is not None:
+        return align(rectangle), "rectangle"
     pts = np.asarray(mesh.vertices, dtype=float)
     axes = _plane_axes(pts)
     normals = mesh.face_normals
@@ -412,6 +454,77 @@ def parametrize(mesh: trimesh.Trimesh) -> tuple[np.ndarray, str]:
         uv, method = _tutte(mesh), "tutte"
     uv = align(uv)
     return uv * math.sqrt(mesh.area / _signed_areas(mesh.faces, uv).sum()), method
+
+
+def corners(points: np.ndarray, normals: np.ndarray, loop: np.ndarray) -> np.ndarray | None:
+    """Positions in the boundary ``loop`` (b,) of the patch's four corners, increasing, or
+    None unless there are exactly four. At every boundary vertex p_k (of ``points`` (n, 3),
+    with unit ``normals`` (n, 3); the loop counter-clockwise about them), the angle between
+    the chords to p_{k-w} and p_{k+w} (w = :data:`CORNER_WINDOW` of the loop, at least one
+    vertex, so a noisy boundary's zigzag averages out); the runs of vertices where the
+    boundary turns left (a convex corner) and that angle is at most CORNER_ANGLE are the
+    corners, each at its smallest angle."""
+    b = len(loop)
+    w = max(1, round(CORNER_WINDOW * b))
+    p = points[loop]
+    back, ahead = np.roll(p, w, axis=0) - p, np.roll(p, -w, axis=0) - p
+    cos = np.einsum("kd,kd->k", back, ahead) / (np.linalg.norm(back, axis=1)
+                                                * np.linalg.norm(ahead, axis=1))
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    left = np.einsum("kd,kd->k", np.cross(-back, ahead), normals[loop]) > 0
+    sharp = (angle <= CORNER_ANGLE) & left
+    if sharp.all() or not sharp.any():
+        return None
+    start = int(np.flatnonzero(~sharp)[0])  # runs, the loop rolled to start outside one
+    order = (start + np.arange(b)) % b
+    runs = np.split(order, np.flatnonzero(np.diff(sharp[order].astype(int)) != 0) + 1)
+    found = sorted(int(run[np.argmin(angle[run])]) for run in runs if sharp[run[0]])
+    return np.asarray(found) if len(found) == 4 else None
+
+
+def _cotangent_laplacian(mesh: trimesh.Trimesh) -> sparse.csr_matrix:
+    """L (n, n) with u' L u the Dirichlet energy of the piecewise linear u: the weight of
+    an edge is half the sum of the cotangents of the angles opposite it."""
+    n, f = len(mesh.vertices), mesh.faces
+    half_cot = 0.5 / np.tan(mesh.face_angles)  # at vertex k of a face: opposite its edge
+    i = np.r_[f[:, 1], f[:, 2], f[:, 0]]
+    j = np.r_[f[:, 2], f[:, 0], f[:, 1]]
+    w = half_cot.T.ravel()
+    weights = sparse.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+    return (sparse.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights).tocsr()
+
+
+def _harmonic(lap: sparse.csr_matrix, zero: np.ndarray, one: np.ndarray
+              ) -> tuple[np.ndarray, float]:
+    """(x (n,), its Dirichlet energy x' L x): L x = 0 but on the vertices ``zero`` (x = 0)
+    and ``one`` (x = 1); the other boundary vertices get no flux (the natural condition)."""
+    x = np.zeros(lap.shape[0])
+    known = np.zeros(lap.shape[0], dtype=bool)
+    known[zero] = known[one] = True
+    x[one] = 1.0
+    free = ~known
+    x[free] = spsolve(lap[free][:, free].tocsc(), -(lap[free][:, known] @ x[known]))
+    return x, float(x @ (lap @ x))
+
+
+def conformal_rectangle(mesh: trimesh.Trimesh) -> np.ndarray | None:
+    """The conformal map (n, 2) of a patch with four :func:`corners` onto a rectangle of the
+    mesh's area (module docstring), the sides in the boundary's order: bottom, right, top,
+    left; None without four corners or where a triangle flips."""
+    loop = _boundary_loop(mesh)
+    at = corners(np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals), loop)
+    if at is None:
+        return None
+    ends = np.r_[at, at[0] + len(loop)]
+    sides = [loop[np.arange(a, b + 1) % len(loop)] for a, b in zip(ends[:-1], ends[1:])]
+    lap = _cotangent_laplacian(mesh)
+    u, energy_u = _harmonic(lap, sides[3], sides[1])
+    v, energy_v = _harmonic(lap, sides[0], sides[2])
+    if not (energy_u > 0 and energy_v > 0):
+        return None
+    aspect = math.sqrt(energy_u / energy_v)  # height over width
+    uv = np.c_[u / math.sqrt(aspect), v * math.sqrt(aspect)] * math.sqrt(mesh.area)
+    return uv if _injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool)) else None
 
 
 def _signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -554,17 +667,42 @@ def _polygon_mask(polygon: np.ndarray) -> np.ndarray:
     return PolygonPath(polygon).contains_points(nodes).reshape(RASTER, RASTER)
 
 
-def _cloud_mask(uv: np.ndarray) -> np.ndarray:
-    """(RASTER, RASTER) mask of the raster nodes inside the region the cloud samples: the
-    Delaunay triangles of uv (n, 2) whose longest edge is at most three times the median
-    longest edge (which drops the long triangles spanning gaps and concave bays)."""
-    gu, gv = _raster(uv)
+def _cloud_faces(uv: np.ndarray) -> tuple[Delaunay, np.ndarray]:
+    """The Delaunay triangulation of uv (n, 2) and the mask (m,) of its triangles whose
+    longest edge is at most three times the median longest edge (which drops the long
+    triangles spanning gaps and concave bays)."""
     tri = Delaunay(uv)
-    corners = uv[tri.simplices]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    keep = np.r_[longest <= 3 * np.median(longest), False]  # index -1 (outside) -> False
+    vertices = uv[tri.simplices]
+    longest = np.linalg.norm(vertices - np.roll(vertices, 1, axis=1), axis=2).max(axis=1)
+    return tri, longest <= 3 * np.median(longest)
+
+
+def _cloud_mask(uv: np.ndarray) -> np.ndarray:
+    """(RASTER, RASTER) mask of the raster nodes inside the region the cloud samples: in
+    the triangles of :func:`_cloud_faces`."""
+    gu, gv = _raster(uv)
+    tri, keep = _cloud_faces(uv)
+    keep = np.r_[keep, False]  # index -1 (outside) -> False
     nodes = np.stack(np.meshgrid(gu, gv, indexing="ij"), -1).reshape(-1, 2)
     return keep[tri.find_simplex(nodes)].reshape(RASTER, RASTER)
+
+
+def _cloud_rectangle(points: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
+    """The :func:`conformal_rectangle` (n, 2) of a cloud's points (n, 3) (on its smoothed
+    surface) triangulated by :func:`_cloud_faces` of their projections uv (n, 2), if that
+    mesh is one disk with four corners that uses every point; else None."""
+    tri, keep = _cloud_faces(uv)
+    faces = tri.simplices[keep]
+    flip = _signed_areas(faces, uv) < 0
+    faces[flip] = faces[flip][:, ::-1]  # counter-clockwise in the plane
+    mesh = trimesh.Trimesh(points, faces, process=False)
+    if len(np.unique(faces)) != len(points):
+        return None
+    try:
+        _check_disk(mesh, "the point cloud")
+    except SurfaceError:
+        return None
+    return conformal_rectangle(mesh)
 
 
 def inscribed_rectangle(uv: np.ndarray, inside: np.ndarray) -> tuple[tuple[float, float],
@@ -623,12 +761,12 @@ def _second_differences(n: int) -> sparse.csr_matrix:
     return sparse.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n)).tocsr()
 
 
-def _fit_spline(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
-                smoothing: float) -> ca.Function:
-    """The P-spline fit (module docstring), as a CasADi bspline interpolant (u, v) -> r (3)."""
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
+def _basis(uv: np.ndarray, lo: np.ndarray, hi: np.ndarray, spans: tuple[int, int]
+           ) -> sparse.csr_matrix:
+    """The tensor-product cubic B-spline basis (n, (n_u + 3) (n_v + 3)) on uniform knots over
+    [lo, hi] at uv (n, 2) (clipped to it)."""
     t_u, t_v = (_uniform_knots(lo[k], hi[k], spans[k]) for k in range(2))
-    n_u, n_v = spans[0] + 3, spans[1] + 3
+    n_v = spans[1] + 3
     b_u = BSpline.design_matrix(np.clip(uv[:, 0], lo[0], hi[0]), t_u, 3).tocsr()
     b_v = BSpline.design_matrix(np.clip(uv[:, 1], lo[1], hi[1]), t_v, 3).tocsr()
     n = len(uv)
@@ -636,15 +774,32 @@ def _fit_spline(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
     wu, wv = b_u.data.reshape(n, 4), b_v.data.reshape(n, 4)
     cols = (iu[:, :, None] * n_v + iv[:, None, :]).reshape(n, 16)
     vals = (wu[:, :, None] * wv[:, None, :]).reshape(n, 16)
-    a = sparse.csr_matrix((vals.ravel(), (np.repeat(np.arange(n), 16), cols.ravel())),
-                          shape=(n, n_u * n_v))
+    return sparse.csr_matrix((vals.ravel(), (np.repeat(np.arange(n), 16), cols.ravel())),
+                             shape=(n, (spans[0] + 3) * n_v))
+
+
+def _smoothed(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
+              smoothing: float) -> np.ndarray:
+    """The P-spline fit (module docstring) over the bounding box of uv (n, 2): its values
+    (n, 3) at uv and its control points ((n_u + 3) (n_v + 3), 3), stacked (n + n_c, 3)."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    n_u, n_v = spans[0] + 3, spans[1] + 3
+    a = _basis(uv, lo, hi, spans)
     d_u = sparse.kron(_second_differences(n_u), sparse.identity(n_v))
     d_v = sparse.kron(sparse.identity(n_u), _second_differences(n_v))
-    weight = smoothing * n / (n_u * n_v)
+    weight = smoothing * len(uv) / (n_u * n_v)
     lhs = (a.T @ a + weight * (d_u.T @ d_u + d_v.T @ d_v)).tocsc()
-    coef = np.asarray(spsolve(lhs, a.T @ points)).reshape(n_u, n_v, 3)
-    g_u, g_v = np.linspace(lo[0], hi[0], 2 * spans[0] + 1), np.linspace(lo[1], hi[1],
-                                                                        2 * spans[1] + 1)
-    e_u, e_v = (BSpline.design_matrix(g, t, 3).toarray() for g, t in ((g_u, t_u), (g_v, t_v)))
-    values = np.einsum("ai,ijc,bj->cab", e_u, coef, e_v)  # (3, len(g_u), len(g_v))
-    return ca.interpolant("mesh_r", "bspline", [g_u, g_v], values.ravel(order="F"))
+    coef = np.asarray(spsolve(lhs, a.T @ points))
+    return np.r_[a @ coef, coef]
+
+
+def _fit_spline(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
+                smoothing: float) -> ca.Function:
+    """The P-spline fit (module docstring), as a CasADi bspline interpolant (u, v) -> r (3)."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    coef = _smoothed(uv, points, spans, smoothing)[len(uv):]
+    g_u, g_v = (np.linspace(lo[k], hi[k], 2 * spans[k] + 1) for k in range(2))
+    grid = np.stack(np.meshgrid(g_u, g_v, indexing="ij"), -1).reshape(-1, 2)
+    values = (_basis(grid, lo, hi, spans) @ coef).reshape(len(g_u), len(g_v), 3)
+    return ca.interpolant("mesh_r", "bspline", [g_u, g_v],
+                          values.transpose(2, 0, 1).ravel(order="F"))

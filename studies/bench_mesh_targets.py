@@ -172,7 +172,7 @@ def main() -> None:
     targets, files = TARGETS, FILES
     if args.smoke:
         targets, args.panels = TARGETS[:1], 8
-        files = {"random.stl": lambda s, f: random_stl(s, f, n=300, side=10),
+        files = {"random.stl": lambda s, f: random_stl(s, f, n=300, side=20),
                  "cloud.xyz": lambda s, f: cloud_xyz(s, f, n=25)}
         args.out = smoke_dir("bench_mesh_targets")
     work = smoke_dir("bench_mesh_targets-files")

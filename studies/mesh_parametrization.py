@@ -1,5 +1,6 @@
 """Which parametrization of a disk-topology mesh that is no graph over its plane? The
-package's scipy LSCM (rffqm_nlp.meshes) against libigl's LSCM (same two pinned vertices),
+package's conformal map onto a rectangle (rffqm_nlp.meshes, for a patch with four corners)
+and its scipy LSCM (for one without) against libigl's LSCM (same two pinned vertices),
 libigl's harmonic map with the boundary on a circle, and Tutte's uniform-weight map (the
 package's fallback).
 
@@ -54,7 +55,8 @@ def _igl_harmonic(mesh):
                         loop.astype(np.int64), bc, 1)
 
 
-METHODS = {"scipy LSCM (package)": meshes._lscm, "libigl LSCM": _igl_lscm,
+METHODS = {"conformal rectangle (package)": meshes.conformal_rectangle,
+           "scipy LSCM (package, no four corners)": meshes._lscm, "libigl LSCM": _igl_lscm,
            "libigl harmonic (circle)": _igl_harmonic, "Tutte (package fallback)": meshes._tutte}
 
 

@@ -31,9 +31,14 @@ def test_mesh_files_reload_onto_the_surface(tmp_path, name, fmt):
     surface.mesh(41, 41).export(path)
     mesh = Mesh(path)
     assert isinstance(mesh, rq.surfaces.Mesh)
-    assert mesh.parametrization == "projection"
+    assert mesh.parametrization == "rectangle"  # every one is a patch with four corners
     assert len(mesh.points) == 41 * 41  # STL's triangle soup merged back
     assert _lattice_error(mesh, surface) < 0.002
+    (a, b), (c, d) = mesh.domain  # the whole patch: the lattice's corners are the mesh's
+    corners = mesh.point(np.array([a, b, b, a]), np.array([c, c, d, d]))
+    assert surface.closest_points(corners)[2].max() < 1e-3 * surface.diameter()
+    assert np.sort(np.linalg.norm(corners[:, None] - mesh.points[None], axis=2).min(1)).max() \
+        < 1e-3 * surface.diameter()
     assert mesh.deviation_max < MAX_DEVIATION and mesh.deviation_rms <= mesh.deviation_max
     assert mesh.to_config() == {"mesh": str(path)}
 
@@ -55,15 +60,71 @@ def test_irregular_triangulation(tmp_path):
     assert _lattice_error(mesh, surface) < 0.002
 
 
-def test_general_disk_uses_a_conformal_map():
-    """A cylinder strip bent by 172 deg is no graph over its plane: LSCM parametrizes it."""
+def test_a_flat_rectangle_maps_onto_itself():
+    """The conformal rectangle of a flat, irregularly meshed 3 x 1.5 rectangle is the
+    rectangle itself, up to a rotation and translation (closed form: the identity)."""
+    rng = np.random.default_rng(5)
+    side = rng.uniform(0, 1, size=(4, 12))
+    uv = np.r_[rng.uniform((0, 0), (3, 1.5), size=(300, 2)),
+               np.c_[3 * side[0], np.zeros(12)], np.c_[3 * side[1], np.full(12, 1.5)],
+               np.c_[np.zeros(12), 1.5 * side[2]], np.c_[np.full(12, 3.0), 1.5 * side[3]],
+               [[0, 0], [3, 0], [3, 1.5], [0, 1.5]]]
+    mesh = meshes._clean(np.c_[uv, np.zeros(len(uv))], Delaunay(uv).simplices, "flat")
+    meshes._check_disk(mesh, "flat")
+    mapped = meshes.conformal_rectangle(mesh)
+    assert mapped is not None
+    assert np.ptp(mapped, axis=0) == pytest.approx([3.0, 1.5], rel=1e-9)
+    offset = mapped - np.asarray(mesh.vertices)[:, :2]  # the loop may start at any corner
+    turned = mapped @ np.array([[-1.0, 0.0], [0.0, -1.0]]) - np.asarray(mesh.vertices)[:, :2]
+    assert min(np.ptp(offset, axis=0).max(), np.ptp(turned, axis=0).max()) < 1e-7
+
+
+def test_a_bent_strip_maps_onto_its_unrolled_rectangle():
+    """A cylinder strip bent by 172 deg (no graph over its plane) is developable: its
+    conformal rectangle is the unrolled strip, 4 by 1.5 x the radius."""
     surface = rq.surfaces.get("cylinder", domain=((-2.0, 2.0), (-1.5, 1.5)))
     mesh = Mesh(surface.mesh(41, 41))
+    assert mesh.parametrization == "rectangle"
+    assert _lattice_error(mesh, surface) < 0.002
+    (a, b), (c, d) = mesh.domain
+    lengths = sorted([b - a, d - c])
+    width, arc = sorted([4.0, 3.0 * surface.params["radius"]])
+    assert lengths == pytest.approx([width, arc], rel=2e-3)
+
+
+def test_corners():
+    """Four corners on a square's boundary (counter-clockwise), none on a circle's, five
+    (convex) on an L's, three on a chevron's (its reflex vertex turns right) and none on a
+    clockwise square's: only the first has four."""
+    def outline(*vertices, per_side=20):
+        """A closed polygon through the vertices, per_side points per side, in the plane."""
+        t = np.linspace(0, 1, per_side, endpoint=False)[:, None]
+        ring = np.array(vertices, dtype=float)
+        sides = [a + t * (b - a) for a, b in zip(ring, np.roll(ring, -1, axis=0))]
+        pts = np.concatenate(sides)
+        return np.c_[pts, np.zeros(len(pts))], np.arange(len(pts))
+
+    def found(points, loop):
+        return meshes.corners(points, np.tile([0.0, 0.0, 1.0], (len(points), 1)), loop)
+
+    theta = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    assert found(np.c_[np.cos(theta), np.sin(theta), np.zeros(80)], np.arange(80)) is None
+    assert list(found(*outline((0, 0), (1, 0), (1, 1), (0, 1)))) == [0, 20, 40, 60]
+    assert found(*outline((0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2))) is None
+    assert found(*outline((0, 0), (2, 1), (0, 2), (0.5, 1))) is None
+    assert found(*outline((0, 0), (0, 1), (1, 1), (1, 0))) is None  # clockwise: turns right
+
+
+def test_a_disk_without_corners_uses_lscm():
+    """The bent strip cut to an ellipse has no corners and is no graph: LSCM."""
+    surface = rq.surfaces.get("cylinder", domain=((-2.0, 2.0), (-1.5, 1.5)))
+    full = surface.mesh(61, 61)
+    u, v = surface.grid_uv(61, 61)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    inside = ((uu / 2.0) ** 2 + (vv / 1.5) ** 2 <= 1.0).ravel()
+    mesh = Mesh((full.vertices, full.faces[inside[full.faces].all(axis=1)]))
     assert mesh.parametrization == "lscm"
     assert _lattice_error(mesh, surface) < 0.002
-    # the domain covers most of the (developable) strip: area close to the surface's
-    (a, b), (c, d) = mesh.domain
-    assert (b - a) * (d - c) > 0.9 * surface.mesh(41, 41).area
 
 
 def test_tutte_fallback_is_injective_with_the_boundary_on_a_circle():
@@ -95,7 +156,7 @@ def test_point_cloud_fit_is_below_the_noise():
     rng = np.random.default_rng(7)
     points = surface.sample(60, 60).reshape(-1, 3)
     cloud = Mesh(points + rng.normal(scale=sigma, size=points.shape))
-    assert cloud.mesh is None and cloud.parametrization == "projection"
+    assert cloud.mesh is None and cloud.parametrization == "rectangle"
     u, v = cloud.grid_uv(30, 30)
     fitted = cloud.point(u[:, None], v[None, :])
     dist = surface.closest_points(fitted)[2]
@@ -108,7 +169,19 @@ def test_point_cloud_file(tmp_path):
     path = tmp_path / "bump.xyz"
     np.savetxt(path, surface.sample(40, 40).reshape(-1, 3))
     cloud = Mesh(path)
-    assert cloud.mesh is None
+    assert cloud.mesh is None and cloud.parametrization == "rectangle"
+    assert _lattice_error(cloud, surface) < 0.002
+
+
+def test_a_round_point_cloud_is_projected():
+    """A cloud sampled over a disk has no corners: the projection and its inscribed
+    rectangle."""
+    surface = rq.surfaces.get("gaussian_bump")
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(-3, 3, size=(3000, 2))
+    uv = uv[np.linalg.norm(uv, axis=1) < 3]
+    cloud = Mesh(surface.point(uv[:, 0], uv[:, 1]))
+    assert cloud.parametrization == "projection"
     assert _lattice_error(cloud, surface) < 0.002
 
 
@@ -242,14 +315,11 @@ def test_a_design_on_a_mesh_is_judged_against_the_mesh(tmp_path):
     surface = rq.surfaces.get("sphere_cap", radius=4.0, domain=[[-0.6, 0.6], [-0.6, 0.6]])
     surface.mesh(41, 41).export(tmp_path / "cap.stl")
     target = Mesh(tmp_path / "cap.stl")
-    # its spline's area over the domain lies between the areas of the mesh's faces wholly
-    # inside the domain and of those touching it
-    (u0, u1), (v0, v1) = target.domain
-    uv = target.uv[target.mesh.faces]
-    inside = (uv[..., 0] >= u0) & (uv[..., 0] <= u1) & (uv[..., 1] >= v0) & (uv[..., 1] <= v1)
-    faces = target.mesh.area_faces
-    assert faces[inside.all(1)].sum() < rq.shape.surface_area(target) < faces[inside.any(1)].sum()
-    result = rq.DesignProblem(target, panels=(8, 8)).solve(rq.SolveOptions(max_iter=30))
+    # its domain is the whole patch: its spline's area over the domain is the mesh's, up
+    # to the chords' O(h^2) (the sphere's area over the same patch is a little larger)
+    assert target.parametrization == "rectangle"
+    assert target.mesh.area < rq.shape.surface_area(target) < 1.001 * target.mesh.area
+    result = rq.DesignProblem(target, panels=(8, 8)).solve(rq.SolveOptions(max_iter=200))
     fit = result.fit
     coarse, every = relative_fit(result.coarse, target), relative_fit(result.folded, target)
     assert (fit.rms_surface, fit.hausdorff) == pytest.approx(
