@@ -33,9 +33,9 @@ Method.
   is lowered, every bound raised, by a small slack (a bound on the rounding).
   Near flat, though, a large sheet bends: one affine map misfits its displacements by
   about the same length whatever the panels' size, so the reaches grow to many panels
-  (docs/collisions.md). From ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels
-  on, each tile gets its own fit (:func:`_local_pairs`): the bound above holds for any
-  affine map, so a pair (p, q) with p in a tile and both residuals measured against that
+  (docs/collisions.md). In such a step (the median reach above ``TILE_REACH`` panel
+  radii), from ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels on, each tile gets its
+  own fit (:func:`_local_pairs`): the bound above holds for any affine map, so a pair (p, q) with p in a tile and both residuals measured against that
   tile's fit needs g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate
   when both the tile's and the global reaches allow it (a subset of the global candidates
   that keeps every pair they must give).
@@ -123,6 +123,10 @@ CHUNK = 4096
 #: (below, one query over the whole sheet costs less than a query per tile).
 TILE = 24
 MIN_TILES = 4
+#: ... and only in a coarse step whose global reaches are large: their median above
+#: TILE_REACH times the panels' median radius (a sheet folding nearly uniformly keeps them
+#: a fraction of a panel, and there the tiles' fits cost more than they save).
+TILE_REACH = 2.0
 
 PanelPair = tuple[tuple[int, int], tuple[int, int]]
 
@@ -832,7 +836,8 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
     SAFETY times the centres' relative displacement plus each panel's largest vertex
     displacement about its centre (at least :func:`_motion`'s). In chunks (rows, m) of at
     most ROWS pairs, from the tree queries of :func:`_close_pairs` with the panels'
-    reaches of :func:`_reach`, or from MIN_TILES tiles on of :func:`_local_pairs`."""
+    reaches of :func:`_reach`, or, where those are far (TILE_REACH) and from MIN_TILES
+    tiles on, of :func:`_local_pairs`."""
     Ta, Tb = st.T[a], st.T[a + 1]
     P = geo.N * geo.M
     C, D = Ta[12:15], Tb[12:15] - Ta[12:15]                          # (3, P)
@@ -841,9 +846,10 @@ def _coarse_rows(geo: _Geometry, st: _States, a: int, clearance: float):
     G = _reach(C, D, spin, geo.radius, clearance)
     eps = _slack(geo, np.stack([C, Tb[12:15]])) + 1e-5 * float(G.max())
     Y = np.concatenate([Tb[12:15], geo.radius[None], D, spin[None]])  # (8, P)
-    tiles = _tiles(geo)
+    far = np.median(G) > TILE_REACH * np.median(geo.radius)
+    tiles = _tiles(geo) if far else None
     pairs = (_local_pairs(geo, tiles, C, D, spin, geo.radius + G, clearance, eps)
-             if len(tiles[2]) >= MIN_TILES
+             if tiles is not None and len(tiles[2]) >= MIN_TILES
              else _close_pairs(geo, C.T, geo.radius + G, 2 * eps))
     for p, q, dist in pairs:
         A, B = Y.take(p, axis=1), Y.take(q, axis=1)                  # (8, n)

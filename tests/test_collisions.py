@@ -462,6 +462,7 @@ def test_tile_fits_give_the_rows_of_the_global_fit(make, seed, clearance, omega_
         return rows[order], m[order], collisions(pat, omega_max, clearance=clearance)
 
     monkeypatch.setattr(collisions_module, "TILE", tile)
+    monkeypatch.setattr(collisions_module, "TILE_REACH", 0.0)  # tiles in every step
     assert len(collisions_module._tiles(geo)[2]) >= 4
     rows, m, report = rows_and_report(1)
     global_rows, global_m, global_report = rows_and_report(10 ** 9)
