@@ -35,9 +35,10 @@ Method.
   about the same length whatever the panels' size, so the reaches grow to many panels
   (docs/collisions.md). In such a step (the median reach above ``TILE_REACH`` panel
   radii), from ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels on, each tile gets its
-  own fit (:func:`_local_pairs`): the bound above holds for any affine map, so a pair (p, q) with p in a tile and both residuals measured against that
-  tile's fit needs g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate
-  when both the tile's and the global reaches allow it (a subset of the global candidates
+  own fit (:func:`_local_pairs`): the bound above holds for any affine map, so a pair
+  (p, q) with p in a tile and both residuals measured against that tile's fit needs
+  g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate when both the
+  tile's and the global reaches allow it (a subset of the global candidates
   that keeps every pair they must give).
 * Memory: no step's pairs are held at once. The tree queries give their pairs in chunks
   of about ``ROWS`` (the first block's count bounds it, each next block is sized from the

@@ -9,22 +9,24 @@ A designer's shape becomes a smooth parametric surface r(u, v) in four steps
    faces dropped. A mesh must be one connected patch of disk topology (one component,
    manifold, exactly one boundary loop, Euler characteristic 1).
 2. **Parametrize.** A patch with four corners (:func:`corners`: exactly four places where
-   the boundary turns left by at least pi - :data:`CORNER_ANGLE`) is mapped conformally onto a rectangle
-   (:func:`conformal_rectangle`): u harmonic (cotangent weights) with u = 0 and 1 on two
-   opposite sides and no flux through the other two, v likewise on the other pair, the
-   rectangle's aspect ratio sqrt(E_u / E_v) from their Dirichlet energies, its area the
-   mesh's; used when no triangle flips. Otherwise, if the mesh is a graph over its best-fit
-   plane (every face normal within :data:`GRAPH_ANGLE` of the plane's normal and no triangle
-   flipped in the projection), (u, v) are the in-plane coordinates; faces covering at most
-   :data:`SLIVER_AREA` of the area may break these two rules (slivers). Otherwise a
-   least-squares conformal map (LSCM, sparse least squares, two boundary vertices pinned),
-   or where that flips a triangle, Tutte's uniform-weight map onto a circle (injective by
-   construction); then scaled to the mesh's area. A point cloud is projected onto its
-   best-fit plane and a first spline fitted there (step 4); its points, moved onto that
-   smooth surface and triangulated in the plane (Delaunay, the long triangles of
-   :func:`_cloud_faces` dropped), take the conformal rectangle when that triangulation is a
-   disk with four corners, else the projection. Either way the parameter image is rotated so that its smallest bounding
-   rectangle is axis-aligned (:func:`align`).
+   the boundary turns left by at least pi - :data:`CORNER_ANGLE`) is mapped conformally
+   onto a rectangle (:func:`conformal_rectangle`): u harmonic (cotangent weights) with u = 0
+   and 1 on two opposite sides and no flux through the other two, v likewise on the other
+   pair, the rectangle's aspect ratio sqrt(E_u / E_v) from their Dirichlet energies, its
+   area the mesh's; used when no triangle flips and the map stretches areas by at most
+   :data:`MAX_AREA_SPREAD` (corners far from right angles stretch them more). Otherwise, if
+   the mesh is a graph over its best-fit plane (every face normal within
+   :data:`GRAPH_ANGLE` of the plane's normal and no triangle flipped in the projection),
+   (u, v) are the in-plane coordinates; faces covering at most :data:`SLIVER_AREA` of the
+   area may break these two rules (slivers). Otherwise a least-squares conformal map (LSCM,
+   sparse least squares, two boundary vertices pinned), or where that flips a triangle,
+   Tutte's uniform-weight map onto a circle (injective by construction); then scaled to the
+   mesh's area. A point cloud is projected onto its best-fit plane and a first spline fitted
+   there (step 4, with ``smoothing``); its points, moved onto that smooth surface and
+   triangulated in the plane (Delaunay, the long triangles of :func:`_cloud_faces` dropped),
+   take the conformal rectangle when that triangulation is a disk with four corners that
+   uses every point, else the projection. Either way the parameter image is rotated so that
+   its smallest bounding rectangle is axis-aligned (:func:`align`).
 3. **Domain.** The rectangle itself for a conformal rectangle (a point cloud's inset by
    :data:`CLOUD_INSET` point spacings, where the spline would follow the noise of the
    boundary points); otherwise the largest
@@ -33,8 +35,8 @@ A designer's shape becomes a smooth parametric surface r(u, v) in four steps
    so the mesh covers the whole domain.
 4. **Spline.** A tensor-product cubic B-spline on uniform knots over the parameter image's
    bounding box, fitted to the parametrized vertices (a point cloud with a conformal
-   rectangle: its points on the first, denoised spline, fitted like a mesh's vertices) by
-   penalised least squares
+   rectangle: its points on the first, denoised spline, fitted like a mesh's vertices, with
+   MESH_SMOOTHING and the mesh's knots) by penalised least squares
    (P-spline): minimise sum_k |s(u_k, v_k) - p_k|^2 + lambda (n / n_c) (|D_u c|^2 + |D_v c|^2)
    over the control points c, with D_u, D_v the second differences of c along u and v,
    n the number of vertices and n_c the number of control points. lambda is
@@ -83,10 +85,15 @@ GRAPH_ANGLE = math.radians(80.0)
 SLIVER_AREA = 1e-4
 #: Largest angle (radians) between a boundary vertex's chords to its neighbours
 #: :data:`CORNER_WINDOW` away for a corner of the patch (a rectangle's corner: pi / 2, a
-#: straight side: pi, a circle: pi - 4 pi CORNER_WINDOW).
+#: straight side: pi, a circle: pi - 2 pi CORNER_WINDOW).
 CORNER_ANGLE = math.radians(155.0)
-#: The chords' reach, as a share of the boundary's vertices (:func:`corners`).
+#: The chords' reach, as a share of the boundary's vertices (:func:`corners`; a side of
+#: fewer than about two reaches merges its corners, and the map falls back).
 CORNER_WINDOW = 0.02
+#: Largest ratio of the 99th to the 1st percentile (by area) of the conformal rectangle's
+#: area scale (parameter area over mesh area per face): a flat parallelogram with 75 deg
+#: corners gives 3.3, with 60 deg 12; the bundled targets' meshes 1.4-2.8.
+MAX_AREA_SPREAD = 10.0
 #: Largest spline deviation from the vertices, over the diameter (max for meshes, RMS for
 #: point clouds).
 MAX_DEVIATION = 0.01
@@ -145,14 +152,13 @@ class Mesh(Surface):
             _check_disk(self.mesh, what)
             self.points = fitted = np.asarray(self.mesh.vertices, dtype=float)
             self.uv, self.parametrization = parametrize(self.mesh)
-            inside = _polygon_mask(self.uv[_boundary_loop(self.mesh)])
             self.knots = knots or _knot_spans(self.uv, MESH_POINTS_PER_CELL)
         else:
             what = what if self.path is not None else "the point cloud"
             self.points = fitted = points
             uv, self._plane_normal = _project(points)
             self.knots = knots or _knot_spans(uv, CLOUD_POINTS_PER_CELL)
-            on_surface = _smoothed(uv, points, self.knots, self.smoothing)[:len(uv)]
+            on_surface = _smoothed(uv, points, self.knots, self.smoothing)[0]
             rectangle = _cloud_rectangle(on_surface, uv)
             if rectangle is None:
                 self.uv, self.parametrization = align(uv), "projection"
@@ -167,8 +173,11 @@ class Mesh(Surface):
                 inset = CLOUD_INSET * math.sqrt(np.prod(hi - lo) / len(self.uv))
                 lo, hi = lo + inset, hi - inset
             domain = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])))
-        else:
+        elif cloud:
             domain = inscribed_rectangle(self.uv, inside)
+        else:
+            domain = inscribed_rectangle(
+                self.uv, _polygon_mask(self.uv[_boundary_loop(self.mesh)]))
         self._spline = _fit_spline(self.uv, fitted, self.knots, fit_smoothing)
         super().__init__(name or (self.path.stem if self.path else "mesh"), {}, domain)
         self._check_deviation(what, cloud)
@@ -335,6 +344,10 @@ def _cloud(vertices: Any, what: str) -> np.ndarray:
     if len(pts) < MIN_POINTS:
         raise SurfaceError(f"{what} has no faces and only {len(pts)} distinct points; give a "
                            f"triangle mesh or a point cloud of at least {MIN_POINTS} points")
+    extent = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
+    if extent[1] <= 1e-9 * extent[0]:
+        raise SurfaceError(f"the points of {what} lie on a line; give a point cloud that "
+                           f"covers a surface patch")
     return pts
 
 
@@ -510,7 +523,8 @@ def _harmonic(lap: sparse.csr_matrix, zero: np.ndarray, one: np.ndarray
 def conformal_rectangle(mesh: trimesh.Trimesh) -> np.ndarray | None:
     """The conformal map (n, 2) of a patch with four :func:`corners` onto a rectangle of the
     mesh's area (module docstring), the sides in the boundary's order: bottom, right, top,
-    left; None without four corners or where a triangle flips."""
+    left; None without four corners, where a triangle flips or where the map stretches
+    areas by more than MAX_AREA_SPREAD."""
     loop = _boundary_loop(mesh)
     at = corners(np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals), loop)
     if at is None:
@@ -524,7 +538,19 @@ def conformal_rectangle(mesh: trimesh.Trimesh) -> np.ndarray | None:
         return None
     aspect = math.sqrt(energy_u / energy_v)  # height over width
     uv = np.c_[u / math.sqrt(aspect), v * math.sqrt(aspect)] * math.sqrt(mesh.area)
-    return uv if _injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool)) else None
+    if not _injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool)):
+        return None
+    return uv if _area_spread(mesh, uv) <= MAX_AREA_SPREAD else None
+
+
+def _area_spread(mesh: trimesh.Trimesh, uv: np.ndarray) -> float:
+    """The ratio of the 99th to the 1st percentile, weighted by the faces' areas, of the
+    map's area scale (the faces' parameter area over their area)."""
+    scale = _signed_areas(mesh.faces, uv) / np.maximum(mesh.area_faces, 1e-300)
+    order = np.argsort(scale)
+    share = np.cumsum(mesh.area_faces[order]) / mesh.area
+    low, high = scale[order][np.searchsorted(share, [0.01, 0.99]).clip(0, len(scale) - 1)]
+    return float(high / low) if low > 0 else math.inf
 
 
 def _signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -693,11 +719,11 @@ def _cloud_rectangle(points: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
     mesh is one disk with four corners that uses every point; else None."""
     tri, keep = _cloud_faces(uv)
     faces = tri.simplices[keep]
+    if len(np.unique(faces)) != len(points):
+        return None
     flip = _signed_areas(faces, uv) < 0
     faces[flip] = faces[flip][:, ::-1]  # counter-clockwise in the plane
     mesh = trimesh.Trimesh(points, faces, process=False)
-    if len(np.unique(faces)) != len(points):
-        return None
     try:
         _check_disk(mesh, "the point cloud")
     except SurfaceError:
@@ -763,8 +789,8 @@ def _second_differences(n: int) -> sparse.csr_matrix:
 
 def _basis(uv: np.ndarray, lo: np.ndarray, hi: np.ndarray, spans: tuple[int, int]
            ) -> sparse.csr_matrix:
-    """The tensor-product cubic B-spline basis (n, (n_u + 3) (n_v + 3)) on uniform knots over
-    [lo, hi] at uv (n, 2) (clipped to it)."""
+    """The tensor-product cubic B-spline basis (n, (spans_u + 3) (spans_v + 3)) on uniform
+    knots over [lo, hi] at uv (n, 2) (clipped to it)."""
     t_u, t_v = (_uniform_knots(lo[k], hi[k], spans[k]) for k in range(2))
     n_v = spans[1] + 3
     b_u = BSpline.design_matrix(np.clip(uv[:, 0], lo[0], hi[0]), t_u, 3).tocsr()
@@ -779,9 +805,9 @@ def _basis(uv: np.ndarray, lo: np.ndarray, hi: np.ndarray, spans: tuple[int, int
 
 
 def _smoothed(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
-              smoothing: float) -> np.ndarray:
+              smoothing: float) -> tuple[np.ndarray, np.ndarray]:
     """The P-spline fit (module docstring) over the bounding box of uv (n, 2): its values
-    (n, 3) at uv and its control points ((n_u + 3) (n_v + 3), 3), stacked (n + n_c, 3)."""
+    (n, 3) at uv and its control points ((spans_u + 3) (spans_v + 3), 3)."""
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     n_u, n_v = spans[0] + 3, spans[1] + 3
     a = _basis(uv, lo, hi, spans)
@@ -790,14 +816,14 @@ def _smoothed(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
     weight = smoothing * len(uv) / (n_u * n_v)
     lhs = (a.T @ a + weight * (d_u.T @ d_u + d_v.T @ d_v)).tocsc()
     coef = np.asarray(spsolve(lhs, a.T @ points))
-    return np.r_[a @ coef, coef]
+    return a @ coef, coef
 
 
 def _fit_spline(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
                 smoothing: float) -> ca.Function:
     """The P-spline fit (module docstring), as a CasADi bspline interpolant (u, v) -> r (3)."""
     lo, hi = uv.min(axis=0), uv.max(axis=0)
-    coef = _smoothed(uv, points, spans, smoothing)[len(uv):]
+    coef = _smoothed(uv, points, spans, smoothing)[1]
     g_u, g_v = (np.linspace(lo[k], hi[k], 2 * spans[k] + 1) for k in range(2))
     grid = np.stack(np.meshgrid(g_u, g_v, indexing="ij"), -1).reshape(-1, 2)
     values = (_basis(grid, lo, hi, spans) @ coef).reshape(len(g_u), len(g_v), 3)

@@ -669,7 +669,8 @@ class _Steps:
         new = np.array([i for i in which.tolist() if i not in m.known], dtype=np.int64)
         if new.size:
             m.known.update(zip(new.tolist(), self._swept(m, new)))
-        return np.array([m.known[i] for i in which.tolist()]).reshape(which.size, -1)
+        return np.array([m.known[i] for i in which.tolist()]).reshape(which.size,
+                                                                      self.man.design.size)
 
     def _swept(self, m: _Model, which: np.ndarray) -> np.ndarray:
         """The dense rows ``which`` of A (which.size, n_d): a state row's part by the

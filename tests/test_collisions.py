@@ -462,11 +462,37 @@ def test_tile_fits_give_the_rows_of_the_global_fit(make, seed, clearance, omega_
         return rows[order], m[order], collisions(pat, omega_max, clearance=clearance)
 
     monkeypatch.setattr(collisions_module, "TILE", tile)
-    monkeypatch.setattr(collisions_module, "TILE_REACH", 0.0)  # tiles in every step
+    monkeypatch.setattr(collisions_module, "TILE_REACH", -np.inf)  # tiles in every step
     assert len(collisions_module._tiles(geo)[2]) >= 4
+    calls = []
+    local_pairs = collisions_module._local_pairs
+    monkeypatch.setattr(collisions_module, "_local_pairs",
+                        lambda *a: calls.append(1) or local_pairs(*a))
     rows, m, report = rows_and_report(1)
+    assert len(calls) >= len(omegas) - 1  # every coarse step took the tiles
     global_rows, global_m, global_report = rows_and_report(10 ** 9)
     assert len(global_rows) > 0
     np.testing.assert_array_equal(rows, global_rows)
     np.testing.assert_array_equal(m, global_m)
     assert report == global_report
+
+
+def test_tiles_only_where_the_global_reaches_are_far(monkeypatch):
+    """A nearly uniformly folding sheet (the perturbed Miura-ori) keeps the global reaches
+    a fraction of a panel: with the default TILE_REACH no coarse step takes the tiles
+    however many there are; with TILE_REACH = 0 (every median reach is above it) each
+    does."""
+    pat = perturbed_miura(0)
+    geo = _Geometry(pat)
+    omegas = np.linspace(0.0, 3.0, 8)
+    monkeypatch.setattr(collisions_module, "TILE", 2)
+    monkeypatch.setattr(collisions_module, "MIN_TILES", 1)
+    calls = []
+    local_pairs = collisions_module._local_pairs
+    monkeypatch.setattr(collisions_module, "_local_pairs",
+                        lambda *a: calls.append(1) or local_pairs(*a))
+    coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), 0.0)
+    assert calls == []
+    monkeypatch.setattr(collisions_module, "TILE_REACH", 0.0)
+    coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), 0.0)
+    assert len(calls) == len(omegas) - 1

@@ -5,6 +5,7 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+import scipy.linalg as la
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
@@ -136,8 +137,12 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     assert ng + nbd + man.bounded_state.size == A.shape[0]
     close(steps.rows(m, which), A[which])
     again = np.concatenate([which[::-2], rng.choice(m.lower.size, 10, replace=False)])
+    swept = []
+    sweep = steps._swept
+    steps._swept = lambda m_, rows_: swept.append(rows_) or sweep(m_, rows_)
     close(steps.rows(m, again), A[again])  # partly from the model's rows known so far
     assert set(m.known) == set(which) | set(again)
+    assert sorted(np.concatenate(swept)) == sorted(set(again) - set(which))  # the new only
     dd = rng.standard_normal(man.design.size)
     close(steps.change(m, dd), A @ dd)
     assert man._window.pool < man.state.size
@@ -308,7 +313,8 @@ def test_step_qp_meets_its_optimality_conditions(manifold, seed, rows, n):
     below = free < kept  # the unconstrained step breaks a lower bound at the kept value
     lba = np.where(below, kept, -1e20)
     uba = np.where(below, 1e20, kept)
-    R = np.linalg.cholesky(H).T
+    R = la.cho_factor(H, lower=False)[0]
+    R[np.tril_indices(n, -1)] = rng.standard_normal(n * (n - 1) // 2)  # not to be read
     step = reduced._Steps(manifold[1])._qp(R, g, np.arange(rows), A, lba, uba)
     dd, y = step.dd, step.multipliers
     scale = 1 + np.abs(g).max() + np.abs(A.T @ y).max()
