@@ -258,11 +258,11 @@ class DesignProblem:
       the Miura start) and "smoothness" (second differences of the boundary perturbation
       along each edge, :func:`rffqm_nlp.transcription.smoothness_residuals`; default 0);
       missing keys count as 0;
-    * ``correspondence``: "lattice" (the default: the target lattice is r on the uniform
-      grid of the domain) or "free" (the (u, v) of every lattice point is a design
-      variable in the domain, the grid kept from folding over,
-      :class:`rffqm_nlp.transcription.Correspondence`: a closer fit to the shape at a
-      higher cost per iteration, measured in docs/meshes.md).
+    * ``correspondence``: "free" (the default: the lattice's (u, v) are a smooth map of
+      the lattice indices whose few controls are design variables, kept in the domain and
+      from folding over, :class:`rffqm_nlp.transcription.Correspondence`) or "lattice"
+      (the target lattice is r on the uniform grid of the domain); "free" fits the shape
+      closer for a few more iterations, measured in docs/meshes.md.
 
     How it is solved is a :class:`SolveOptions`, given to :meth:`solve`.
     """
@@ -279,7 +279,7 @@ class DesignProblem:
     omega_bounds: tuple[float, float] = (0.05, PI - 0.05)
     fix: tuple[str, ...] = ()
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
-    correspondence: str = "lattice"
+    correspondence: str = "free"
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, surfaces.Surface):
@@ -362,21 +362,17 @@ class DesignProblem:
         """The free correspondence from the uniform grid (None with "lattice")."""
         if self.correspondence != "free":
             return None
-        u, v = self.target.lattice_uv(self.N, self.M)
-        U, V = np.meshgrid(u, v, indexing="ij")
-        return transcription.Correspondence(self.target.casadi_function(), self.target.domain,
-                                            U, V)
+        return transcription.Correspondence.uniform(
+            self.target.casadi_function(), self.target.domain, (self.N + 1, self.M + 1))
 
     def grid(self, result: DesignResult) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid (U, V), each (N+1, M+1), of a free correspondence at ``result`` (a
         result of this problem, read from its design vector); None with "lattice"."""
-        if self.correspondence != "free":
+        corr = self._correspondence()
+        if corr is None:
             return None
         nlp = self.transcribe(options=SolveOptions.from_config(result.problem["solve"]))
-        uv = np.asarray(result.x)[nlp.grid_index]
-        n = uv.size // 2
-        return tuple(uv[k * n:(k + 1) * n].reshape(self.N + 1, self.M + 1, order="F")
-                     for k in (0, 1))
+        return corr.grid(*corr.views(np.asarray(result.x)[nlp.grid_index]))
 
     # ------------------------------------------------------------------ solve
     def solve(self, options: SolveOptions | None = None, *,
@@ -727,6 +723,10 @@ MEMORY_BASE = 150e6
 MEMORY_PER_PANEL = {"levenberg-marquardt": 26e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
+#: ... for Levenberg-Marquardt with a free correspondence this per panel more (the
+#: residuals' Jacobian reads the target lattice; measured 7.1 and 8.0 kB at 200 and 300
+#: panels a side, docs/solvers.md) ...
+MEMORY_FREE_PER_PANEL = 7.5e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later
 #: level still needs, :class:`rffqm_nlp.reduced._Window`; fitted to 20 to 100 panels a side)
@@ -734,7 +734,7 @@ MEMORY_SEQUENTIAL_BUILD = 700e6
 WORKING_SET, WORKING_SET_POWER = 17.6, 0.705
 #: ... and its dense design x design matrices held at once (J'J, the metric, the secant
 #: term, the damped matrix and its factor, the last iteration's, the step QP's copy):
-#: counted in reduced.py, not fitted; they matter for a free correspondence's large design.
+#: counted in reduced.py, not fitted.
 DESIGN_MATRICES = 10
 
 
@@ -744,18 +744,22 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
 
     For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
     WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
-    n_d = 3 (P + Q) design variables plus the 2 (P/2 + 1) (Q/2 + 1) grid
-    variables of a free correspondence (an extrapolation, not measured); IPOPT needs
+    n_d = 3 (P + Q) design variables, and with a free correspondence
+    (:class:`rffqm_nlp.transcription.Correspondence`) MEMORY_FREE_PER_PANEL * P Q more and
+    its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2) in n_d; IPOPT needs
     MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
     the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
     if options.solver == LM:
         design = 3.0 * (P + Q)
+        per_panel = MEMORY_PER_PANEL[LM]
         if problem.correspondence == "free":
-            design += 2.0 * (P / 2 + 1) * (Q / 2 + 1)
+            k = transcription.GRID_CONTROLS
+            design += 2.0 * min(k, P / 2 + 1) * min(k, Q / 2 + 1)
+            per_panel += MEMORY_FREE_PER_PANEL
         working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * design
-        need = (MEMORY_BASE + MEMORY_PER_PANEL[LM] * P * Q + working_set
+        need = (MEMORY_BASE + per_panel * P * Q + working_set
                 + 8.0 * DESIGN_MATRICES * design ** 2)
     else:
         need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q

@@ -827,5 +827,13 @@ def _fit_spline(uv: np.ndarray, points: np.ndarray, spans: tuple[int, int],
     g_u, g_v = (np.linspace(lo[k], hi[k], 2 * spans[k] + 1) for k in range(2))
     grid = np.stack(np.meshgrid(g_u, g_v, indexing="ij"), -1).reshape(-1, 2)
     values = (_basis(grid, lo, hi, spans) @ coef).reshape(len(g_u), len(g_v), 3)
-    return ca.interpolant("mesh_r", "bspline", [g_u, g_v],
-                          values.transpose(2, 0, 1).ravel(order="F"))
+    spline = ca.interpolant("mesh_r", "bspline", [g_u, g_v],
+                            values.transpose(2, 0, 1).ravel(order="F"))
+    # CasADi's bspline is 0 outside its grid: a parameter a round-off outside (a free
+    # correspondence's grid on the domain's edge) is put back on it, with the identity's
+    # derivative on the edge itself
+    uv_sym = ca.SX.sym("uv", 2)
+    on_grid = ca.vertcat(*(ca.if_else(uv_sym[k] < lo[k], lo[k],
+                                      ca.if_else(uv_sym[k] > hi[k], hi[k], uv_sym[k]))
+                           for k in range(2)))
+    return ca.Function("mesh_r", [uv_sym], [spline(on_grid)])

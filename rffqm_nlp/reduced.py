@@ -277,7 +277,7 @@ class _Window:
     come first). A slot freed is reused by a later level. Only the design variables the
     marching equations use (``marching``, n_m of them: the boundary data and omega) have
     columns in the pool; S is zero in the others (``free``: the rigid alignment, a free
-    correspondence's grid), whose reduced Jacobian is J_d's sparse columns (when they are
+    correspondence's controls), whose reduced Jacobian is J_d's sparse columns (when they are
     :data:`FREE_COLUMNS` or more; fewer stay in the pool). Static: built once from the
     sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in level order) has
     data = 1 + the index of each nonzero in the residuals' Jacobian.

@@ -11,6 +11,7 @@ stencils"). Rows whose derivatives are constant (linear rows) are given as tripl
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
@@ -89,8 +90,8 @@ class _Mapped:
         f = s.function
         z, p = f.sx_in() if f.is_a("SXFunction") else f.mx_in()
         jac = ca.Function(f"d_{f.name()}", [z, p], [ca.jacobian(f(z, p), z)])
-        colind, row = jac.sparsity_out(0).get_ccs()
-        col = np.repeat(np.arange(len(colind) - 1), np.diff(colind))
+        colind, row = (np.array(a, dtype=np.int64) for a in jac.sparsity_out(0).get_ccs())
+        col = np.repeat(np.arange(colind.size - 1), np.diff(colind))
         n = s.columns.shape[0]
         self._stencil, self._local = s, (row, col)
         self._index = s.columns
@@ -166,3 +167,69 @@ class LocalJacobian:
             m(x)
         values = np.concatenate([m.out for m in mapped] + [self._constant])
         return np.bincount(self._position, weights=values, minlength=self._pattern.nnz)
+
+
+class LiftedJacobian:
+    """The Jacobian (n_g x n_x) of rows f(x, u) at u = h(x), where h reads only a few
+    columns of x (``columns``, k of them): J = F_x + F_u H, with F the
+    :class:`LocalJacobian` ``inner`` over (x, u) (n_g x (n_x + n_u)) and H = dh/dx in those
+    columns (n_u x k, dense).
+
+    ``lift``: x -> (u (n_u,), H (n_u, k)); ``reach`` (n_u, k), bool: H's structural
+    nonzeros. Where u is many intermediate values of a few variables (a free
+    correspondence's target lattice of its controls), F is local and cheap to build; the
+    Jacobian of f(x, h(x)) in x directly is dense in those few columns, and CasADi's build
+    of it is not cheap. The same interface as LocalJacobian: :meth:`pattern` and the
+    nonzeros at x.
+    """
+
+    def __init__(self, inner: LocalJacobian,
+                 lift: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+                 columns: np.ndarray, reach: np.ndarray):
+        self.inner, self.shape = inner, (inner.shape[0], inner.shape[1] - reach.shape[0])
+        self._lift, self._columns, self._reach = lift, np.asarray(columns), reach
+        self._built = False
+
+    def _build(self) -> None:
+        if self._built:
+            return
+        n_x = self.shape[1]
+        F = self.inner.pattern()
+        Fx, Fu = F[:, :n_x].tocoo(), F[:, n_x:].tocsr()
+        self._lifted_rows = np.flatnonzero(np.diff(Fu.indptr))  # the rows that read u
+        Fu = Fu[self._lifted_rows]
+        # the nonzeros of F_u H: the lifted rows' entries in the columns that they reach
+        ones = sp.csr_matrix((np.ones(Fu.nnz), Fu.indices, Fu.indptr), shape=Fu.shape)
+        self._reached = (ones @ self._reach.astype(float)) > 0  # (lifted rows, k)
+        at_row, at_col = np.nonzero(self._reached)
+        rows = np.concatenate([Fx.row, self._lifted_rows[at_row]])
+        cols = np.concatenate([Fx.col, self._columns[at_col]])
+        key, position = np.unique(cols * self.shape[0] + rows, return_inverse=True)
+        col, row = np.divmod(key, self.shape[0])
+        self._pattern = sp.csc_matrix((np.arange(1, key.size + 1, dtype=float), (row, col)),
+                                      shape=self.shape)
+        self._pattern.sort_indices()
+        # where each of F_x's nonzeros and each reached entry of F_u H go, and which of the
+        # inner Jacobian's nonzeros they read
+        self._from_x = (position[:Fx.nnz], Fx.data.astype(np.int64) - 1)
+        self._to_lifted = position[Fx.nnz:]
+        self._Fu_index = Fu.data.astype(np.int64) - 1
+        self._Fu = sp.csr_matrix((np.zeros(Fu.nnz), Fu.indices, Fu.indptr), shape=Fu.shape)
+        self._built = True
+
+    def pattern(self) -> sp.csc_matrix:
+        """The sparsity, data = 1 + the index of each nonzero."""
+        self._build()
+        return self._pattern.copy()
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The nonzeros (nnz,) at x (n_x,)."""
+        self._build()
+        u, H = self._lift(x)
+        values = self.inner(np.concatenate([x, u]))
+        out = np.zeros(self._pattern.nnz)
+        to, index = self._from_x
+        out[to] = values[index]
+        self._Fu.data[:] = values[self._Fu_index]
+        out[self._to_lifted] += (self._Fu @ H)[self._reached]
+        return out

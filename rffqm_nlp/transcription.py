@@ -9,7 +9,7 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
 
 Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term, the
 inline constraints (angle bounds, multiplier margins, the boundary MV assignment, sides
-against the mean side) and a free correspondence's grid (:class:`Correspondence`), so they
+against the mean side) and a free correspondence's controls (:class:`Correspondence`), so they
 state the same problem. The simultaneous NLP also carries the Jacobians of its residuals and
 constraints assembled from local stencils (:class:`_ConstraintStencils`), which
 :mod:`rffqm_nlp.reduced` uses instead of CasADi's Jacobians of the whole graph.
@@ -23,6 +23,7 @@ from collections.abc import Callable, Sequence
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 from . import numpy_model, shape, stencils
 from . import vertex as vx
@@ -68,12 +69,12 @@ class NLP:
     #: Function of x: the target lattice (Tx, Ty, Tz), each (N+1, M+1), of a free
     #: correspondence (:class:`Correspondence`); None: the target lattice is fixed
     free_target: ca.Function | None = None
-    #: indices in x of that correspondence's grid, U then V (each column-major)
+    #: indices in x of that correspondence's controls, Cu then Cv (each column-major)
     grid_index: np.ndarray | None = None
     #: the Jacobians of the residuals and of g assembled from local stencils
     #: (:mod:`rffqm_nlp.stencils`), for :mod:`rffqm_nlp.reduced`; None: only CasADi's
     #: Jacobians of the whole graph
-    r_jacobian: stencils.LocalJacobian | None = None
+    r_jacobian: stencils.LocalJacobian | stencils.LiftedJacobian | None = None
     g_jacobian: stencils.LocalJacobian | None = None
 
     @property
@@ -222,73 +223,182 @@ def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar,
     return ca.vertcat(*out)
 
 
-#: A free correspondence's grid keeps every forward difference (of u along i, of v along
-#: j) at least this fraction of the uniform grid's step, and every corner of every cell
-#: an orientation (the determinant of its two edges) at least its square, relative to the
-#: uniform cell: the grid neither folds over nor collapses (docs/meshes.md).
+#: A free correspondence's (u, v) map keeps every forward difference of u along i and of v
+#: along j at least this fraction of the uniform grid's step (exactly: on its controls'
+#: differences, see :meth:`Correspondence.rows`), and every corner of every cell of its
+#: control net an orientation at least its square, relative to the uniform net's: the map
+#: neither folds over nor collapses (docs/meshes.md).
 MIN_GRID_STEP = 0.5
 #: The weight of a free correspondence's Tikhonov term towards the uniform grid, as a
 #: fraction of the "regularization" weight (docs/meshes.md).
 GRID_REGULARIZATION = 0.1
+#: A free correspondence's (u, v) map is a clamped cubic tensor-product B-spline of the
+#: lattice indices with at most this many controls a side, however large the pattern
+#: (docs/meshes.md).
+GRID_CONTROLS = 4
+
+
+def _clamped_basis(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(B, g): the clamped uniform B-spline basis of degree min(3, k - 1) with k controls on
+    [0, 1] at the n points i / (n - 1), B (n, k), and the controls' Greville abscissae g
+    (k,), with which the spline is the identity (B @ g = i / (n - 1))."""
+    from scipy.interpolate import BSpline
+
+    p = min(3, k - 1)
+    knots = np.concatenate([np.zeros(p), np.linspace(0.0, 1.0, k - p + 1), np.ones(p)])
+    greville = np.array([knots[a + 1:a + p + 1].mean() for a in range(k)])
+    basis = BSpline.design_matrix(np.linspace(0.0, 1.0, n), knots, p).toarray()
+    return basis, greville
 
 
 @dataclass(frozen=True)
 class Correspondence:
-    """A free correspondence (docs/meshes.md): the parameters (u_ij, v_ij) of every coarse
-    lattice point are design variables and the target lattice is r(u_ij, v_ij).
+    """A free correspondence (docs/meshes.md): the parameters (u_ij, v_ij) of the coarse
+    lattice are a tensor-product B-spline of the lattice indices whose controls are design
+    variables, and the target lattice is r(u_ij, v_ij).
 
     ``surface``: the target's CasADi Function (u, v) -> r (3 x 1); ``domain``: ((u0, u1),
-    (v0, v1)); ``U0``, ``V0`` (N+1, M+1): the starting grid, uniform over the domain, also
-    the reference of the Tikhonov term. The grid's first and last rows hold u = u0 and u1,
-    its first and last columns v = v0 and v1: its edges slide along the domain's edges and
-    its corners stay, so a design spans the whole domain. Vectors of the grid hold U then
-    V, each column-major (as ``ca.vec``).
+    (v0, v1)); ``Bu`` (N+1, Ku), ``Bv`` (M+1, Kv): the bases along i and along j
+    (:func:`_clamped_basis`), so the grid is U = Bu Cu Bv', V = Bu Cv Bv' for the controls
+    Cu, Cv (Ku, Kv); ``gu`` (Ku,), ``gv`` (Kv,): the Greville abscissae, so the uniform grid
+    (the start, and the reference of the Tikhonov term) has controls u0 + (u1 - u0) gu
+    along i and v0 + (v1 - v0) gv along j. The controls' first and last rows hold u = u0
+    and u1, their first and last columns v = v0 and v1: the grid's edges slide along the
+    domain's edges and its corners stay, so a design spans the whole domain. Vectors of
+    the controls hold Cu then Cv, each column-major (as ``ca.vec``).
     """
 
     surface: ca.Function
     domain: tuple[tuple[float, float], tuple[float, float]]
-    U0: np.ndarray
-    V0: np.ndarray
+    Bu: np.ndarray
+    Bv: np.ndarray
+    gu: np.ndarray
+    gv: np.ndarray
+
+    @classmethod
+    def uniform(cls, surface: ca.Function, domain, lattice: tuple[int, int],
+                controls: int | None = None) -> Correspondence:
+        """The correspondence of an (N+1) x (M+1) ``lattice`` with min(``controls``,
+        N+1) x min(``controls``, M+1) controls (default :data:`GRID_CONTROLS`)."""
+        k = GRID_CONTROLS if controls is None else controls
+        (Bu, gu), (Bv, gv) = (_clamped_basis(n, min(k, n)) for n in lattice)
+        return cls(surface, domain, Bu, Bv, gu, gv)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(Ku, Kv): the controls' shape."""
+        return self.Bu.shape[1], self.Bv.shape[1]
+
+    @property
+    def size(self) -> int:
+        """Design variables: 2 Ku Kv."""
+        return 2 * self.Bu.shape[1] * self.Bv.shape[1]
 
     @property
     def steps(self) -> tuple[float, float]:
         """The uniform grid's steps (du, dv)."""
         (u0, u1), (v0, v1) = self.domain
-        return (u1 - u0) / (self.U0.shape[0] - 1), (v1 - v0) / (self.U0.shape[1] - 1)
+        return (u1 - u0) / (self.Bu.shape[0] - 1), (v1 - v0) / (self.Bv.shape[0] - 1)
+
+    def _uniform(self) -> tuple[np.ndarray, np.ndarray]:
+        """The uniform grid's controls (Cu0, Cv0), each (Ku, Kv)."""
+        (u0, u1), (v0, v1) = self.domain
+        Cu, Cv = np.meshgrid(u0 + (u1 - u0) * self.gu, v0 + (v1 - v0) * self.gv,
+                             indexing="ij")
+        return Cu, Cv
 
     def start(self) -> np.ndarray:
-        """The starting grid as a vector (2 (N+1) (M+1),)."""
-        return np.concatenate([self.U0.ravel("F"), self.V0.ravel("F")])
+        """The uniform grid's controls as a vector (2 Ku Kv,)."""
+        return np.concatenate([c.ravel("F") for c in self._uniform()])
+
+    def views(self, part):
+        """(Cu, Cv), each (Ku, Kv), of a controls vector ``part`` (NumPy or CasADi)."""
+        ku, kv = self.shape
+        if isinstance(part, np.ndarray):
+            return part[:ku * kv].reshape(ku, kv, order="F"), part[ku * kv:].reshape(
+                ku, kv, order="F")
+        return ca.reshape(part[:ku * kv], ku, kv), ca.reshape(part[ku * kv:], ku, kv)
+
+    def grid(self, Cu, Cv):
+        """The grid (U, V), each (N+1, M+1), of the controls (NumPy or CasADi)."""
+        if isinstance(Cu, np.ndarray):
+            return self.Bu @ Cu @ self.Bv.T, self.Bu @ Cv @ self.Bv.T
+        Bu, BvT = ca.sparsify(ca.DM(self.Bu)), ca.sparsify(ca.DM(self.Bv.T))  # exact zeros
+        return ca.mtimes([Bu, Cu, BvT]), ca.mtimes([Bu, Cv, BvT])
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lbx, ubx) of the grid vector: the domain, the edges pinned."""
+        """(lbx, ubx) of the controls vector: the domain, the edges pinned."""
         (u0, u1), (v0, v1) = self.domain
-        shape = self.U0.shape
+        shape = self.shape
         lu, hu, lv, hv = (np.full(shape, b) for b in (u0, u1, v0, v1))
         hu[0, :], lu[-1, :] = u0, u1
         hv[:, 0], lv[:, -1] = v0, v1
         return (np.concatenate([lu.ravel("F"), lv.ravel("F")]),
                 np.concatenate([hu.ravel("F"), hv.ravel("F")]))
 
-    def lattice(self, U: ca.MX, V: ca.MX) -> list[ca.MX]:
+    def lift(self) -> np.ndarray:
+        """d vec(U) / d vec(Cu) = d vec(V) / d vec(Cv) = Bv (x) Bu, ((N+1) (M+1), Ku Kv):
+        the grid is linear in the controls (column-major vectors)."""
+        return np.kron(self.Bv, self.Bu)
+
+    def target_values(self, controls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T, H) at a controls vector (2 Ku Kv,): the target lattice T (3 n,), (Tx, Ty,
+        Tz) each column-major over the n = (N+1) (M+1) points, and its Jacobian in the
+        controls H (3 n, 2 Ku Kv)."""
+        U, V = self.grid(*self.views(controls))
+        first = self._first.map(U.size)
+        T, T_u, T_v = (a.full() for a in first(U.ravel("F")[None], V.ravel("F")[None]))
+        L = self.lift()
+        H = np.concatenate([np.concatenate([T_u[k][:, None] * L, T_v[k][:, None] * L], axis=1)
+                            for k in range(3)])
+        return T.ravel(), H
+
+    def target_reach(self) -> np.ndarray:
+        """(3 n, 2 Ku Kv), bool: the structural nonzeros of :meth:`target_values`' H."""
+        reach_u, reach_v = (ca.DM(s, 1).full().ravel() > 0 for s in (
+            self._first.sparsity_out(1), self._first.sparsity_out(2)))
+        L = self.lift() != 0
+        return np.concatenate([np.concatenate([L & reach_u[k], L & reach_v[k]], axis=1)
+                               for k in range(3)])
+
+    @cached_property
+    def _first(self) -> ca.Function:
+        """(u, v) -> (r, r_u, r_v) of the target surface."""
+        u, v = ca.SX.sym("u"), ca.SX.sym("v")
+        r = self.surface(u, v)
+        return ca.Function("first", [u, v], [r, ca.jacobian(r, u), ca.jacobian(r, v)])
+
+    def lattice(self, Cu: ca.MX, Cv: ca.MX) -> list[ca.MX]:
+        """The target lattice (Tx, Ty, Tz) at the controls' grid, each (N+1) x (M+1)."""
+        return self.target(*self.grid(Cu, Cv))
+
+    def target(self, U: ca.MX, V: ca.MX) -> list[ca.MX]:
         """The target lattice (Tx, Ty, Tz) at the grid U, V, each (N+1) x (M+1)."""
-        n1, m1 = self.U0.shape
+        n1, m1 = self.Bu.shape[0], self.Bv.shape[0]
         pts = self.surface.map(n1 * m1)(ca.vec(U).T, ca.vec(V).T)  # 3 x n
         return [ca.reshape(pts[k, :].T, n1, m1) for k in range(3)]
 
-    def rows(self, U: ca.MX, V: ca.MX) -> tuple[ca.MX, np.ndarray, np.ndarray]:
-        """(g, lbg, ubg): the forward differences of u along i and of v along j over the
-        uniform steps, and the orientation of every cell at its four corners over the
-        uniform cell's, at least :data:`MIN_GRID_STEP` and its square."""
-        du, dv = self.steps
-        steps = ca.vertcat(ca.vec(U[1:, :] - U[:-1, :]) / du, ca.vec(V[:, 1:] - V[:, :-1]) / dv)
-        # (u, v) of the cells' corners (a, b) = (i offset, j offset), each N x M
-        c = {(a, b): (U[a:U.shape[0] - 1 + a, b:U.shape[1] - 1 + b],
-                      V[a:V.shape[0] - 1 + a, b:V.shape[1] - 1 + b])
+    def rows(self, Cu: ca.MX, Cv: ca.MX) -> tuple[ca.MX, np.ndarray, np.ndarray]:
+        """(g, lbg, ubg): the controls' forward differences (of Cu along i, of Cv along
+        j) over the uniform net's, at least :data:`MIN_GRID_STEP`, and the orientation of
+        every cell of the control net at its four corners over the uniform net's, at least
+        its square.
+
+        The spline's derivative along i is a B-spline whose coefficients are those
+        difference quotients times (u1 - u0), so every forward difference of the grid's
+        U along i is at least MIN_GRID_STEP uniform steps (and of V along j)."""
+        (u0, u1), (v0, v1) = self.domain
+        hu, hv = np.diff(self.gu) * (u1 - u0), np.diff(self.gv) * (v1 - v0)
+        ku, kv = self.shape
+        steps = ca.vertcat(ca.vec((Cu[1:, :] - Cu[:-1, :]) / ca.repmat(ca.DM(hu), 1, kv)),
+                           ca.vec((Cv[:, 1:] - Cv[:, :-1]) / ca.repmat(ca.DM(hv).T, ku, 1)))
+        area = ca.DM(np.outer(hu, hv))
+        # (u, v) of the net's cells' corners (a, b) = (i offset, j offset), each (Ku-1, Kv-1)
+        c = {(a, b): (Cu[a:ku - 1 + a, b:kv - 1 + b], Cv[a:ku - 1 + a, b:kv - 1 + b])
              for a in (0, 1) for b in (0, 1)}
 
         def turn(p, q, o):  # orientation of the edges o -> p, o -> q
-            return ((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])) / (du * dv)
+            return ((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])) / area
 
         turns = ca.vertcat(*(ca.vec(turn(c[p], c[q], c[o])) for p, q, o in (
             ((1, 0), (0, 1), (0, 0)), ((1, 1), (0, 0), (1, 0)),
@@ -297,19 +407,20 @@ class Correspondence:
                                 np.full(turns.numel(), MIN_GRID_STEP ** 2)])
         return ca.vertcat(steps, turns), lower, np.full(lower.size, np.inf)
 
-    def residuals(self, U: ca.MX, V: ca.MX, weight: float) -> ca.MX:
-        """The Tikhonov term towards the starting grid, in uniform steps, times
-        sqrt(weight / its count)."""
+    def residuals(self, Cu: ca.MX, Cv: ca.MX, weight: float) -> ca.MX:
+        """The Tikhonov term towards the uniform grid's controls, in uniform steps, times
+        sqrt(weight / their count)."""
         du, dv = self.steps
-        delta = ca.vertcat(ca.vec(U - ca.DM(self.U0)) / du, ca.vec(V - ca.DM(self.V0)) / dv)
+        Cu0, Cv0 = self._uniform()
+        delta = ca.vertcat(ca.vec(Cu - ca.DM(Cu0)) / du, ca.vec(Cv - ca.DM(Cv0)) / dv)
         return np.sqrt(weight / delta.numel()) * delta
 
     def damping_weights(self) -> np.ndarray:
-        """D of :func:`gauss_newton_hessian` for the grid vector: 1 / (step^2 n), n the
-        number of lattice points (a change of one uniform step weighs like one lattice
-        spacing of a length)."""
+        """D of :func:`gauss_newton_hessian` for the controls vector: 1 / (step^2 n), n the
+        number of controls (a change of one uniform step weighs like one lattice spacing
+        of a length)."""
         du, dv = self.steps
-        n = self.U0.size
+        n = self.size // 2
         return np.concatenate([np.full(n, 1 / (du ** 2 * n)), np.full(n, 1 / (dv ** 2 * n))])
 
 
@@ -371,17 +482,21 @@ class Setup:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
 
-def _objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.MX:
+def _objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None,
+                         target=None) -> ca.MX:
     """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the
     Tikhonov term towards the Miura start and the smoothness of the boundary perturbation
-    (lengths in units of the lattice spacing). ``grid``: (U, V) of a free correspondence
-    (the target lattice at them, and their Tikhonov term), or None."""
+    (lengths in units of the lattice spacing). ``grid``: the controls (Cu, Cv) of a free
+    correspondence (the target lattice at their grid, and their Tikhonov term), or None;
+    ``target``: that target lattice (Tx, Ty, Tz) as symbols of its own (default: computed
+    from ``grid``)."""
     q, t = rigid[:4], rigid[4:]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
     scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
     delta = (boundary_vec - ref) * scale
-    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+    if target is None:
+        target = setup.target if grid is None else setup.correspondence.lattice(*grid)
     out = [loss_residuals(r, rotation_from_quaternion(q), t, target, setup.weights,
                           setup.spacing),
            ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
@@ -418,25 +533,25 @@ def smoothness_residuals(delta: Scalar, N: int, M: int) -> Scalar:
 
 def sequential(setup: Setup) -> NLP:
     """The sequential transcription: x = (boundary angles, boundary lengths, omega, q, t),
-    then the grid (U, V) of a free correspondence.
+    then the controls (Cu, Cv) of a free correspondence.
 
     The pattern and the folded state are functions of x through the marching graph; the
     inline constraints are every vertex angle in [min_angle, pi - min_angle], the multiplier
     margin of every panel, the MV assignment of every boundary vertex
     (:meth:`Setup.boundary_mv`), every side >= min_length * mean side, and a free
-    correspondence's grid rows (:meth:`Correspondence.rows`).
+    correspondence's control rows (:meth:`Correspondence.rows`).
     """
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
     nv, nl = N + 1 + M, N + M
     corr = setup.correspondence
-    n_grid = 0 if corr is None else 2 * corr.U0.size
+    n_grid = 0 if corr is None else corr.size
     n_fixed = 2 * nv + nl + 1 + 7
     x = ca.MX.sym("x", n_fixed + n_grid)
     groups = {"angles": slice(0, 2 * nv), "lengths": slice(2 * nv, 2 * nv + nl),
               "omega": slice(2 * nv + nl, 2 * nv + nl + 1),
               "rigid": slice(2 * nv + nl + 1, 2 * nv + nl + 8)}
-    grid = None if corr is None else _grid_views(corr, x[n_fixed:])
+    grid = None if corr is None else corr.views(x[n_fixed:])
     sig = ca.DM(bd0.sigma).T
     tri = ca.vertcat(x[:nv].T, x[nv:2 * nv].T, sig)
     lengths = x[groups["lengths"]].T
@@ -482,12 +597,6 @@ def sequential(setup: Setup) -> NLP:
                unpack=unpack, folded=folded, groups=groups, damping_weights=weights,
                free_target=free_target,
                grid_index=None if corr is None else np.arange(n_fixed, n_fixed + n_grid))
-
-
-def _grid_views(corr: Correspondence, part: ca.MX) -> tuple[ca.MX, ca.MX]:
-    """(U, V), each (N+1) x (M+1), of a free correspondence's grid vector ``part``."""
-    n1, m1 = corr.U0.shape
-    return ca.reshape(part[:n1 * m1], n1, m1), ca.reshape(part[n1 * m1:], n1, m1)
 
 
 def _with_grid_rows(corr: Correspondence, grid: tuple[ca.MX, ca.MX], g: ca.MX,
@@ -652,7 +761,7 @@ def simultaneous(setup: Setup) -> NLP:
     n1, m1 = N + 1, M + 1
     tree = _MeanTree(n1 * M + N * m1)
     corr = setup.correspondence
-    grid_blocks = {} if corr is None else {"U": corr.U0.shape, "V": corr.U0.shape}
+    grid_blocks = {} if corr is None else {"U": corr.shape, "V": corr.shape}
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
                    "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
                    "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "PHI": (N - 1, M),
@@ -713,7 +822,7 @@ def simultaneous(setup: Setup) -> NLP:
     marched_point = _marched_point(lay, start.sigma, tree)
 
     def point(pattern, omega: float, rigid: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """x of the marched pattern, with the grid ``uv`` of a free correspondence."""
+        """x of the marched pattern, with the controls ``uv`` of a free correspondence."""
         out = marched_point(pattern, omega, rigid)
         out[grid_index] = uv
         return out
@@ -780,11 +889,12 @@ def _constraint_jacobian(setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _M
     return _ConstraintStencils(setup, lay, sigma, tree).jacobian(n_g)
 
 
-def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int) -> stencils.LocalJacobian:
+def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int
+                       ) -> stencils.LocalJacobian | stencils.LiftedJacobian:
     """The Jacobian of :func:`simultaneous`'s residuals (n_r rows): one instance of
     :func:`_objective_residuals` on the variables it reads (the coarse lattice's folded
-    vertices, the alignment, the boundary data vector and a free correspondence's grid), a
-    far smaller graph than the NLP's."""
+    vertices, the alignment, the boundary data vector and a free correspondence's
+    controls), a far smaller graph than the NLP's."""
     N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
     i, j = _grid(N // 2 + 1, M // 2 + 1)
     lattice = [ca.MX.sym(n, *i.shape) for n in ("Yx", "Yy", "Yz")]
@@ -793,16 +903,27 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int) -> stencils.LocalJa
     columns.append(np.arange(lay.slices["rigid"].start, lay.slices["rigid"].stop))
     boundary = _boundary_columns(lay)
     bvec = ca.MX.sym("boundary", boundary.size)
-    inputs, grid = [*lattice, rigid, bvec], None
+    inputs, grid, target = [*lattice, rigid, bvec], None, None
     columns.append(boundary)
-    if setup.correspondence is not None:
-        grid = tuple(ca.MX.sym(n, *setup.correspondence.U0.shape) for n in ("U", "V"))
-        inputs += grid
-        columns += [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]
-    expr = _objective_residuals(setup, lattice, rigid, bvec, grid)
-    return stencils.LocalJacobian([stencils.single("residuals", inputs, expr,
-                                                   np.concatenate(columns), np.arange(n_r))],
-                                  [], (n_r, lay.size))
+    corr, n_t = setup.correspondence, 0
+    if corr is not None:
+        # the target lattice read as variables of its own, lifted from the controls after
+        # (stencils.LiftedJacobian): the residuals' Jacobian stays local
+        grid = tuple(ca.MX.sym(n, *corr.shape) for n in ("U", "V"))
+        target = [ca.MX.sym(n, *i.shape) for n in ("Tx", "Ty", "Tz")]
+        controls = np.concatenate([np.arange(lay.slices[n].start, lay.slices[n].stop)
+                                   for n in ("U", "V")])
+        n_t = 3 * i.size
+        inputs += [*grid, *target]
+        columns += [controls, lay.size + np.arange(n_t)]
+    expr = _objective_residuals(setup, lattice, rigid, bvec, grid, target)
+    inner = stencils.LocalJacobian([stencils.single("residuals", inputs, expr,
+                                                    np.concatenate(columns), np.arange(n_r))],
+                                   [], (n_r, lay.size + n_t))
+    if corr is None:
+        return inner
+    return stencils.LiftedJacobian(inner, lambda x: corr.target_values(x[controls]), controls,
+                                   corr.target_reach())
 
 
 def _boundary_columns(lay: _Layout) -> np.ndarray:
@@ -1021,9 +1142,9 @@ class _ConstraintStencils:
             np.concatenate([np.ones(r.size), np.full(r.size, -self.setup.min_length)])))
 
     def _grid_rows(self) -> None:
-        """The grid rows of a free correspondence (:meth:`Correspondence.rows`)."""
+        """The control rows of a free correspondence (:meth:`Correspondence.rows`)."""
         corr, lay = self.setup.correspondence, self.lay
-        U, V = (ca.SX.sym(n, *corr.U0.shape) for n in ("U", "V"))
+        U, V = (ca.SX.sym(n, *corr.shape) for n in ("U", "V"))
         g, _, _ = corr.rows(U, V)
         self._whole("grid", [U, V], g, np.concatenate(
             [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]))

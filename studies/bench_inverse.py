@@ -2,7 +2,8 @@
 differences on the same loss, and the sequential against the simultaneous transcription.
 
 Part A (same problem, same start, same loss): the sphere cap (targets/sphere_cap.toml) at
-8x8 and 12x12 panels, stop_rms=None.
+8x8 and 12x12 panels, stop_rms=None, the target lattice fixed (``correspondence =
+"lattice"``: the loss the NumPy objective below states).
 
 * IPOPT: the package's ``DesignProblem.solve()`` (sequential transcription, exact Hessian,
   inline constraints), run in a fresh subprocess per case so that its peak memory and time
@@ -52,13 +53,17 @@ SOLVE = {"solver": "ipopt", "transcription": "sequential", "hessian": "exact",
          "stop_rms": None}
 
 
+#: the target lattice fixed, as in the NumPy objective (its loss has no free correspondence)
+DESIGN = {"correspondence": "lattice"}
+
+
 def problem(n: int, layout: str) -> DesignProblem:
-    return target_problem(TARGET, n, layout=layout)[0]
+    return target_problem(TARGET, n, layout=layout, **DESIGN)[0]
 
 
 def run_ipopt(n: int, layout: str, transcription: str = "sequential", **solve) -> dict:
     """One IPOPT solve of the n x n sphere cap in a fresh subprocess."""
-    return solve_in_child(TARGET, n, {"layout": layout},
+    return solve_in_child(TARGET, n, {"layout": layout, **DESIGN},
                           {**SOLVE, "transcription": transcription, **solve})
 
 

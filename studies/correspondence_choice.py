@@ -1,6 +1,7 @@
 """Which correspondence fits the shape better at equal panels: the fixed target lattice
 (``correspondence = "lattice"``: r on the uniform grid of the domain) or the free one
-(``"free"``: the (u, v) of every lattice point a design variable, docs/meshes.md)?
+(``"free"``, the default: the lattice's (u, v) a B-spline map of the lattice indices whose
+controls are design variables, docs/meshes.md)?
 
 Each bundled target (targets/<name>.toml) and two mesh targets (the hyperboloid's and the
 quarter vase's surface over its domain written as a 61 x 61 ``grid.obj``, as in
@@ -14,10 +15,13 @@ the uniform step (the bound is ``transcription.MIN_GRID_STEP``).
 
 A second table solves the bundled targets in the free mode with the Tikhonov weight of the
 grid (``transcription.GRID_REGULARIZATION``, a fraction of the "regularization" weight) at
-three values, the middle one the package's. A third measures the cost per iteration against
-size: the sphere cap at 20, 40 and 60 panels a side, four iterations of the default solver
-in each mode (build and solve time), each in a fresh process; with ``--previous REV`` the
-code at that git revision runs the same right after, and the table gives the ratio.
+three values, the middle one the package's, and with the map's controls a side
+(``transcription.GRID_CONTROLS``) at three values, the first the package's; another table
+compares the modes on the bundled targets at 8, 12, 16 and 30 panels a side. The last
+measures the cost per iteration against size: the sphere cap at 20, 40 and 60 panels a
+side, four iterations of the default solver in each mode (build and solve time), each in a
+fresh process; with ``--previous REV`` the code at that git revision runs the same right
+after, and the table gives the ratio.
 
     .venv/bin/python studies/correspondence_choice.py [--panels 20] [--previous REV]
         [--out studies/results]
@@ -48,6 +52,10 @@ MODES = ("lattice", "free")
 MESH_TARGETS = ("hyperboloid", "quarter_vase")
 #: the grid's Tikhonov weights of the second table, as multiples of the package's
 GRID_WEIGHTS = (0.1, 1.0, 10.0)
+#: the map's controls a side in the second table
+CONTROLS = (4, 6, 8)
+#: panels a side of the table of other sizes (the bundled targets, both modes)
+FIT_SIZES = (8, 12, 16, 30)
 #: panels a side and iterations of the third table
 SIZES, ITERATIONS = (20, 40, 60), 4
 
@@ -144,16 +152,32 @@ def main_table(rows: list[dict], run: Run, n: int) -> str:
 
 
 def weight_table(rows: list[dict]) -> str:
-    lines = ["", "## The grid's Tikhonov weight (free mode)", "",
+    lines = ["", "## The grid's Tikhonov weight and controls (free mode)", "",
              f"GRID_REGULARIZATION = {transcription.GRID_REGULARIZATION:g} x the factor "
-             "(of the \"regularization\" weight).", "",
-             "| target | factor | rms_surface | rms_surface_vertices | iterations | time (s) | "
-             "min grid step | status |", "|---|---|---|---|---|---|---|---|"]
+             "(of the \"regularization\" weight); controls: GRID_CONTROLS (the package's: "
+             f"{transcription.GRID_CONTROLS}).", "",
+             "| target | factor | controls | rms_surface | rms_surface_vertices | iterations | "
+             "time (s) | min grid step | status |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['target']} | {r['factor']:g} | {pct(r.get('rms_surface'))} | "
+        lines.append(f"| {r['target']} | {r['factor']:g} | {r['controls']} | "
+                     f"{pct(r.get('rms_surface'))} | "
                      f"{pct(r.get('rms_surface_vertices'))} | "
                      f"{fmt(r.get('iterations'), 'd')} | {r['time']:.1f} | "
                      f"{fmt(r.get('min_step'), '.2f')} | {r['status']} |")
+    return "\n".join(lines) + "\n"
+
+
+def sizes_table(rows: list[dict]) -> str:
+    lines = ["", "## Other sizes (bundled targets)", "",
+             "| target | panels | rms_surface lattice | free | free / lattice | iterations "
+             "lattice | free | time (s) lattice | free |", "|---|---|---|---|---|---|---|---|---|"]
+    for lat, free in zip(rows[::2], rows[1::2]):
+        ratio = (free["rms_surface"] / lat["rms_surface"]
+                 if "rms_surface" in lat and "rms_surface" in free else None)
+        lines.append(f"| {lat['target']} | {lat['n']} | {pct(lat.get('rms_surface'))} | "
+                     f"{pct(free.get('rms_surface'))} | {fmt(ratio, '.2f')} | "
+                     f"{fmt(lat.get('iterations'), 'd')} | {fmt(free.get('iterations'), 'd')} | "
+                     f"{lat['time']:.1f} | {free['time']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -177,22 +201,31 @@ def main(argv: list[str] | None = None) -> None:
                 rows.append(solve(label, replace(problem, correspondence=mode), options))
                 print(rows[-1], file=sys.stderr, flush=True)
     weights = []
-    base = transcription.GRID_REGULARIZATION
+    base, controls = transcription.GRID_REGULARIZATION, transcription.GRID_CONTROLS
+    settings = ([(factor, controls) for factor in factors]
+                + [(1.0, k) for k in CONTROLS if k != controls and factors])
     try:
         for name in names:
             problem, options = target_problem(name, n, correspondence="free")
-            for factor in factors:
+            for factor, k in settings:
                 transcription.GRID_REGULARIZATION = base * factor
-                weights.append({**solve(name, problem, options), "factor": factor})
+                transcription.GRID_CONTROLS = k
+                weights.append({**solve(name, problem, options), "factor": factor,
+                                "controls": k})
                 print(weights[-1], file=sys.stderr, flush=True)
     finally:
-        transcription.GRID_REGULARIZATION = base
+        transcription.GRID_REGULARIZATION, transcription.GRID_CONTROLS = base, controls
+    others = [{**solve(name, replace(problem, panels=(size, size), correspondence=mode),
+                       options), "n": size}
+              for name in names for size in (() if args.smoke else FIT_SIZES)
+              for problem, options in [target_problem(name, size)] for mode in MODES]
     codes = {"this": ROOT}
     if args.previous and sizes:
         codes[f"previous ({args.previous})"] = export_package(args.previous)
     costs = [iteration_cost(size, mode, code, package)
              for size in sizes for mode in MODES for code, package in codes.items()]
     text = (main_table(rows, run, n) + (weight_table(weights) if weights else "")
+            + (sizes_table(others) if others else "")
             + (cost_table(costs) if costs else ""))
     write_table(out / "correspondence_choice.md", text)
 

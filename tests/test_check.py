@@ -147,8 +147,9 @@ def test_min_clearance_keeps_the_distance_it_promises(result, options):
 
 
 def test_impossible_min_clearance_ends_clearance_not_met(result, options):
+    """Three mean sides: farther than two panels one panel apart are in any state."""
     with pytest.raises(rq.SolverFailed, match="min_clearance = .* is not met") as info:
-        problem(min_clearance=0.6).solve(options)
+        problem(min_clearance=3.0).solve(options)
     assert info.value.status == "clearance_not_met"
     assert "panels (" in str(info.value)
 

@@ -21,8 +21,9 @@ def cap():
 
 @pytest.fixture(scope="module")
 def designed(cap):
-    """An 8 x 8 design of the sphere cap, solved to convergence."""
-    return rq.DesignProblem(cap, panels=(8, 8)).solve()
+    """An 8 x 8 design of the sphere cap, solved to convergence, the target lattice fixed
+    (at 8 x 8 panels a free correspondence fits the sphere cap less closely: docs/meshes.md)."""
+    return rq.DesignProblem(cap, panels=(8, 8), correspondence="lattice").solve()
 
 
 def test_sphere_cap_lattice_has_k_one_over_r_squared_and_h_one_over_r(cap):

@@ -289,12 +289,18 @@ def test_damping_weights_count_lengths_in_spacings_and_follow_the_target_size(tr
         start = prob.start()
         nlp = prob.transcribe(start, options=opts)
         D = nlp.damping_weights
-        n = start.target_points.shape[0] * start.target_points.shape[1]
         assert D.shape == nlp.x0.shape
-        np.testing.assert_allclose(np.unique(np.round(D * n, 12)),
+        # a free correspondence's controls: 1 / (uniform step^2 their count)
+        grid = nlp.grid_index
+        du = np.ptp(prob.target.domain[0]) / (start.target_points.shape[0] - 1)
+        np.testing.assert_allclose(D[grid] * grid.size / 2, du ** -2)
+        other = np.ones(D.size, dtype=bool)
+        other[grid] = False
+        n = start.target_points.shape[0] * start.target_points.shape[1]
+        np.testing.assert_allclose(np.unique(np.round(D[other] * n, 12)),
                                    np.sort([1.0, 1 / start.spacing ** 2]), rtol=1e-9)
         weights.append(D)
-        lengths = ~np.isclose(D * n, 1.0)
+        lengths = ~np.isclose(D * n, 1.0) & other
         assert lengths[nlp.groups["lengths"]].all()
         assert not lengths[nlp.groups["angles"]].any() and not lengths[nlp.groups["omega"]]
     np.testing.assert_allclose(weights[1][lengths], weights[0][lengths] / 100, rtol=1e-9)
@@ -394,7 +400,10 @@ def test_transcriptions_state_the_same_problem_at_the_start(layout):
 
 @pytest.mark.parametrize("name", ["sphere_cap", "quarter_vase"])
 def test_transcriptions_reach_the_same_optimum(name):
-    prob, opts = small(name, tol=1e-9, transcription="sequential")
+    # the lattice mode for the sphere cap: at 8 x 8 panels its free correspondence has two
+    # local minima, which the two transcriptions reach one each (docs/meshes.md)
+    mode = "lattice" if name == "sphere_cap" else "free"
+    prob, opts = small(name, tol=1e-9, transcription="sequential", correspondence=mode)
     seq = prob.solve(opts)
     sim = prob.solve(opts, transcription="simultaneous")
     assert sim.stats.transcription == "simultaneous"

@@ -3,6 +3,7 @@ checks, parametrization, spline fit and distances to the shape."""
 
 import re
 
+import casadi as ca
 import numpy as np
 import pytest
 import trimesh
@@ -346,3 +347,21 @@ def test_a_design_on_a_mesh_is_judged_against_the_mesh(tmp_path):
     assert fit.coverage == pytest.approx(
         rq.shape.lattice_area(result.coarse) / rq.shape.surface_area(target), rel=1e-12)
     assert 0.9 < fit.coverage < 1.1 and fit.rms_surface < 0.25 * fit.plane_rms
+
+
+def test_the_spline_is_its_edge_a_round_off_outside_its_domain():
+    """CasADi's bspline is 0 outside its grid: a (u, v) a round-off past the domain's edge
+    (a free correspondence's grid on the edge, computed through its controls) must give the
+    edge's point, and the derivative along the edge must be the spline's own."""
+    mesh = Mesh(_plane_grid())
+    (u0, u1), (v0, v1) = mesh.domain
+    f = mesh.casadi_function()
+    for u, v in [(u0, 0.5 * (v0 + v1)), (u1, v1), (0.5 * (u0 + u1), v0)]:
+        edge = f(u, v).full()
+        for du, dv in [(-1e-15, 0), (1e-15, 0), (0, -1e-15), (0, 1e-15)]:
+            np.testing.assert_allclose(f(u + du, v + dv).full(), edge, atol=1e-12)
+    a, b = ca.SX.sym("a"), ca.SX.sym("b")
+    jac = ca.Function("j", [a, b], [ca.jacobian(f(a, b), ca.vertcat(a, b))])
+    mid = 0.5 * (v0 + v1)
+    np.testing.assert_allclose(jac(u0, mid).full(), jac(u0 + 1e-6 * (u1 - u0), mid).full(),
+                               atol=1e-4)

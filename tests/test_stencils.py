@@ -49,6 +49,30 @@ def test_a_toy_stencil_with_a_repeated_column_and_linear_rows():
                 ca.Function("J", [x], [ca.jacobian(g, x)])(value).sparse())
 
 
+def test_a_lifted_jacobian_is_the_chain_rule():
+    """g = (x_0 u_0 + u_1^2, x_3 u_1, x_0 + x_3) at u = h(x) = (x_1^2, x_1 x_2, 0): the
+    Jacobian of g(x, h(x)) from the local one over (x, u) and H = dh/dx in the columns
+    (1, 2) it reads, against CasADi's; u_2 is read by no row and reaches no column."""
+    z = ca.SX.sym("z", 5)  # x_0, x_3, u_0, u_1, u_2
+    p = ca.SX.sym("p", 0)
+    f = ca.Function("f", [z, p], [ca.vertcat(z[0] * z[2] + z[3] ** 2, z[1] * z[3], z[0] + z[1])])
+    inner = stencils.LocalJacobian([stencils.stencil(f, [[0, 3, 4, 5, 6]], [[0, 1, 2]])], [],
+                                   (3, 4 + 3))
+
+    def lift(x):
+        return (np.array([x[1] ** 2, x[1] * x[2], 0.0]),
+                np.array([[2 * x[1], 0.0], [x[2], x[1]], [0.0, 0.0]]))
+
+    reach = np.array([[True, False], [True, True], [False, False]])
+    jac = stencils.LiftedJacobian(inner, lift, np.array([1, 2]), reach)
+    x = ca.MX.sym("x", 4)
+    u0, u1 = x[1] ** 2, x[1] * x[2]
+    g = ca.vertcat(x[0] * u0 + u1 ** 2, x[3] * u1, x[0] + x[3])
+    value = np.array([0.3, -1.2, 2.0, 0.7])
+    assert_same(assembled(jac, value),
+                ca.Function("J", [x], [ca.jacobian(g, x)])(value).sparse())
+
+
 def test_rows_covered_twice_or_not_at_all_are_refused():
     z, p = ca.SX.sym("z", 1), ca.SX.sym("p", 0)
     s = stencils.stencil(ca.Function("f", [z, p], [z ** 2]), [[0], [1]], [[0], [0]])
