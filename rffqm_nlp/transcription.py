@@ -9,10 +9,10 @@ A transcription turns the declarative problem into ``(x, residuals, g, bounds, x
 
 Both share the residuals of the loss (:func:`loss_residuals`), the Tikhonov term, the
 inline constraints (angle bounds, multiplier margins, the boundary MV assignment, sides
-against the mean side) and a free correspondence's controls (:class:`Correspondence`), so they
-state the same problem. The simultaneous NLP also carries the Jacobians of its residuals and
-constraints assembled from local stencils (:class:`_ConstraintStencils`), which
-:mod:`rffqm_nlp.reduced` uses instead of CasADi's Jacobians of the whole graph.
+against the mean side) and a free correspondence's controls (:class:`Correspondence`), so
+they state the same problem. The simultaneous NLP also carries the Jacobians of its
+residuals and constraints assembled from local stencils (:class:`_ConstraintStencils`),
+which :mod:`rffqm_nlp.reduced` uses instead of CasADi's Jacobians of the whole graph.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
+from scipy.interpolate import BSpline
 
 from . import numpy_model, shape, stencils
 from . import vertex as vx
@@ -242,8 +242,6 @@ def _clamped_basis(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(B, g): the clamped uniform B-spline basis of degree min(3, k - 1) with k controls on
     [0, 1] at the n points i / (n - 1), B (n, k), and the controls' Greville abscissae g
     (k,), with which the spline is the identity (B @ g = i / (n - 1))."""
-    from scipy.interpolate import BSpline
-
     p = min(3, k - 1)
     knots = np.concatenate([np.zeros(p), np.linspace(0.0, 1.0, k - p + 1), np.ones(p)])
     greville = np.array([knots[a + 1:a + p + 1].mean() for a in range(k)])
@@ -276,7 +274,7 @@ class Correspondence:
     gv: np.ndarray
 
     @classmethod
-    def uniform(cls, surface: ca.Function, domain, lattice: tuple[int, int],
+    def uniform(cls, surface: ca.Function, domain: tuple, lattice: tuple[int, int],
                 controls: int | None = None) -> Correspondence:
         """The correspondence of an (N+1) x (M+1) ``lattice`` with min(``controls``,
         N+1) x min(``controls``, M+1) controls (default :data:`GRID_CONTROLS`)."""
@@ -311,7 +309,7 @@ class Correspondence:
         """The uniform grid's controls as a vector (2 Ku Kv,)."""
         return np.concatenate([c.ravel("F") for c in self._uniform()])
 
-    def views(self, part):
+    def views(self, part: np.ndarray | ca.MX) -> tuple:
         """(Cu, Cv), each (Ku, Kv), of a controls vector ``part`` (NumPy or CasADi)."""
         ku, kv = self.shape
         if isinstance(part, np.ndarray):
@@ -319,7 +317,7 @@ class Correspondence:
                 ku, kv, order="F")
         return ca.reshape(part[:ku * kv], ku, kv), ca.reshape(part[ku * kv:], ku, kv)
 
-    def grid(self, Cu, Cv):
+    def grid(self, Cu: np.ndarray | ca.MX, Cv: np.ndarray | ca.MX) -> tuple:
         """The grid (U, V), each (N+1, M+1), of the controls (NumPy or CasADi)."""
         if isinstance(Cu, np.ndarray):
             return self.Bu @ Cu @ self.Bv.T, self.Bu @ Cv @ self.Bv.T
