@@ -56,7 +56,7 @@ GRID_WEIGHTS = (0.1, 1.0, 10.0)
 CONTROLS = (4, 6, 8)
 #: panels a side of the table of other sizes (the bundled targets, both modes)
 FIT_SIZES = (8, 12, 16, 30)
-#: panels a side and iterations of the third table
+#: panels a side and iterations of the last table
 SIZES, ITERATIONS = (20, 40, 60), 4
 
 
@@ -215,10 +215,8 @@ def main(argv: list[str] | None = None) -> None:
                 print(weights[-1], file=sys.stderr, flush=True)
     finally:
         transcription.GRID_REGULARIZATION, transcription.GRID_CONTROLS = base, controls
-    others = [{**solve(name, replace(problem, panels=(size, size), correspondence=mode),
-                       options), "n": size}
-              for name in names for size in (() if args.smoke else FIT_SIZES)
-              for problem, options in [target_problem(name, size)] for mode in MODES]
+    others = [{**solve(name, *target_problem(name, size, correspondence=mode)), "n": size}
+              for name in names for size in (() if args.smoke else FIT_SIZES) for mode in MODES]
     codes = {"this": ROOT}
     if args.previous and sizes:
         codes[f"previous ({args.previous})"] = export_package(args.previous)

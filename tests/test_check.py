@@ -147,7 +147,8 @@ def test_min_clearance_keeps_the_distance_it_promises(result, options):
 
 
 def test_impossible_min_clearance_ends_clearance_not_met(result, options):
-    """Three mean sides: farther than two panels one panel apart are in any state."""
+    """Three mean sides: farther apart than two panels with one panel between them can be
+    in any state."""
     with pytest.raises(rq.SolverFailed, match="min_clearance = .* is not met") as info:
         problem(min_clearance=3.0).solve(options)
     assert info.value.status == "clearance_not_met"

@@ -9,12 +9,11 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 from rffqm_nlp import design, transcription
 from rffqm_nlp.cli import app
 from rffqm_nlp.design import DesignProblem, SolveOptions
