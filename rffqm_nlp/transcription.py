@@ -334,7 +334,8 @@ class Correspondence:
         return (np.concatenate([lu.ravel("F"), lv.ravel("F")]),
                 np.concatenate([hu.ravel("F"), hv.ravel("F")]))
 
-    def lift(self) -> np.ndarray:
+    @cached_property
+    def _lift(self) -> np.ndarray:
         """d vec(U) / d vec(Cu) = d vec(V) / d vec(Cv) = Bv (x) Bu, ((N+1) (M+1), Ku Kv):
         the grid is linear in the controls (column-major vectors)."""
         return np.kron(self.Bv, self.Bu)
@@ -344,9 +345,9 @@ class Correspondence:
         Tz) each column-major over the n = (N+1) (M+1) points, and its Jacobian in the
         controls H (3 n, 2 Ku Kv)."""
         U, V = self.grid(*self.views(controls))
-        first = self._first.map(U.size)
-        T, T_u, T_v = (a.full() for a in first(U.ravel("F")[None], V.ravel("F")[None]))
-        L = self.lift()
+        # row vectors of n columns make CasADi evaluate the Function n times
+        T, T_u, T_v = (a.full() for a in self._first(U.ravel("F")[None], V.ravel("F")[None]))
+        L = self._lift
         H = np.concatenate([np.concatenate([T_u[k][:, None] * L, T_v[k][:, None] * L], axis=1)
                             for k in range(3)])
         return T.ravel(), H
@@ -355,7 +356,7 @@ class Correspondence:
         """(3 n, 2 Ku Kv), bool: the structural nonzeros of :meth:`target_values`' H."""
         reach_u, reach_v = (ca.DM(s, 1).full().ravel() > 0 for s in (
             self._first.sparsity_out(1), self._first.sparsity_out(2)))
-        L = self.lift() != 0
+        L = self._lift != 0
         return np.concatenate([np.concatenate([L & reach_u[k], L & reach_v[k]], axis=1)
                                for k in range(3)])
 
@@ -368,10 +369,7 @@ class Correspondence:
 
     def lattice(self, Cu: ca.MX, Cv: ca.MX) -> list[ca.MX]:
         """The target lattice (Tx, Ty, Tz) at the controls' grid, each (N+1) x (M+1)."""
-        return self.target(*self.grid(Cu, Cv))
-
-    def target(self, U: ca.MX, V: ca.MX) -> list[ca.MX]:
-        """The target lattice (Tx, Ty, Tz) at the grid U, V, each (N+1) x (M+1)."""
+        U, V = self.grid(Cu, Cv)
         n1, m1 = self.Bu.shape[0], self.Bv.shape[0]
         pts = self.surface.map(n1 * m1)(ca.vec(U).T, ca.vec(V).T)  # 3 x n
         return [ca.reshape(pts[k, :].T, n1, m1) for k in range(3)]
