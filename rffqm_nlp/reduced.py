@@ -18,8 +18,9 @@ level), and the state is ordered by level. The state's sensitivity S = -C_s^{-1}
 earlier levels. S is never stored whole. One pass over the levels (:class:`_Window`) keeps
 only the rows of S that a later level or a residual still needs (a working set that shrinks,
 relative to the state, as the pattern grows) and reduces them at once into the
-n_d x n_d matrices the step needs: J' J of the reduced Jacobian J = J_d + J_s S, the
-gradient J' r and the metric below. The inequality rows G_d + G_s S that a step needs come
+n_d x n_d matrices the step needs: J' J of the reduced Jacobian J = J_d + J_s S (plus, with
+a free correspondence, the controls' F_T H, kept as its factors), the gradient J' r and the
+metric below. The inequality rows G_d + G_s S that a step needs come
 from the sweep backwards through the levels (S' applied to their state parts), and every
 row's change under a step from one forward sweep (S dd).
 
@@ -65,6 +66,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_bipartite_matching
 
 from .errors import InputError
+from .stencils import Lift, LiftedJacobian, index_array
 from .transcription import NLP
 
 #: constraint violation up to which a marched design counts as admissible
@@ -77,10 +79,6 @@ MAX_DAMPING = 1e10
 BLOCK = 1 << 24
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`)
 GRAM_ROWS = 1024
-#: how many design variables outside the march (S is zero there) :class:`_Window` keeps
-#: out of its pool: fewer (the rigid alignment alone) cost less as columns of zeros than
-#: with their own products at every level
-FREE_COLUMNS = 64
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: statuses of a run that ended where it should
@@ -129,6 +127,8 @@ class _Linearization:
     the sweeps through the marching equations there (``levels``: S = ds/dd applied to a
     block, and its transpose), and the reduced problem's J' J, J' r and the metric's
     S_p' D_p S_p (n_d x n_d, n_d), accumulated level by level (:class:`_Window`) without S.
+    With a lifted residual Jacobian (:class:`rffqm_nlp.stencils.LiftedJacobian`), J_design
+    holds its direct part and ``lift`` the rest, F_u H, its columns numbered in the design.
     Valid until the manifold linearises at the next point (``levels`` is refilled there)."""
 
     J_design: sp.csr_matrix
@@ -139,10 +139,22 @@ class _Linearization:
     JtJ: np.ndarray
     grad: np.ndarray
     pattern_metric: np.ndarray
+    lift: Lift | None
+
+    def jacobian_times(self, X: np.ndarray) -> np.ndarray:
+        """Jr X (n_r,) or (n_r, p) for X (n_d,) or (n_d, p), Jr = J_design + J_state S (+
+        F_u H) the reduced Jacobian."""
+        out = self.J_design @ X + self.J_state @ self.levels.forward(X)
+        if self.lift is not None:
+            out[self.lift.rows] += self.lift.times(X)
+        return out
 
     def jacobian_transpose(self, w: np.ndarray) -> np.ndarray:
-        """Jr' w (n_d,) for w (n_r,), Jr = J_design + J_state S the reduced Jacobian."""
-        return self.J_design.T @ w + self.levels.adjoint(self.J_state.T @ w)
+        """Jr' w (n_d,) for w (n_r,)."""
+        out = self.J_design.T @ w + self.levels.adjoint(self.J_state.T @ w)
+        if self.lift is not None:
+            out[self.lift.columns] += self.lift.transpose_times(w)
+        return out
 
     def state_change(self, dd: np.ndarray) -> np.ndarray:
         """S dd (n_s,): the state's first-order change under the design change dd (n_d,)."""
@@ -197,10 +209,11 @@ class _Levels:
         self.n_d, self.n_s = Cd.shape[1], Cs.shape[1]
         W = sp.hstack([Cd, Cs], format="csr")  # rows: equations in level order
         W.sort_indices()
-        self.W = W  # the pattern, data = 1 + index in G
-        self._index = W.data.astype(np.int64) - 1
-        self._row = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
+        self._index = index_array(W.data - 1)  # of each nonzero in G
+        self._counts = np.diff(W.indptr)
         self.data = np.zeros(W.nnz)
+        W.data = self.data  # W's values: refilled with the shared array
+        self.W = W
         self._diagonal = diagonal  # per equation (level order): its own unknown's index in G
         self.bounds = bounds
         self.blocks = [self.block(lo, hi, W.indices[W.indptr[lo]:W.indptr[hi]], self.n_d + lo)
@@ -230,7 +243,7 @@ class _Levels:
             perm.append(start + order)
             indptr = np.concatenate([[0], np.cumsum(np.bincount(used, minlength=columns.size))])
             parts.append((columns, row[order], indptr, hi - lo))
-        self._tperm = np.concatenate(perm) if perm else np.zeros(0, dtype=np.int64)
+        self._tperm = index_array(np.concatenate(perm) if perm else np.zeros(0))
         self._tdata = np.zeros(self._tperm.size)
         self.transposed, k = [], 0
         for columns, row, indptr, rows in parts:
@@ -246,7 +259,7 @@ class _Levels:
         diagonal = G[self._diagonal]
         if np.any(diagonal == 0):
             return False
-        self.data[:] = G[self._index] * (-1.0 / diagonal)[self._row]
+        self.data[:] = G[self._index] * np.repeat(-1.0 / diagonal, self._counts)
         self._tdata[:] = self.data[self._tperm]
         return True
 
@@ -274,17 +287,22 @@ class _Window:
     Each state row gets a slot in a pool (``pool`` rows) from its level until the last
     level that uses it: the marching equations of a later level, or a residual row, which
     is reduced at the level of its latest state unknown (residual rows that use no state
-    come first). A slot freed is reused by a later level. Only the design variables the
-    marching equations use (``marching``, n_m of them: the boundary data and omega) have
-    columns in the pool; S is zero in the others (``free``: the rigid alignment, a free
-    correspondence's controls), whose reduced Jacobian is J_d's sparse columns (when they are
-    :data:`FREE_COLUMNS` or more; fewer stay in the pool). Static: built once from the
-    sparsity; ``J`` (n_r x (n_d + n_s), design columns then the state in level order) has
-    data = 1 + the index of each nonzero in the residuals' Jacobian.
-    ``pattern`` (state rows) and ``weights`` are the metric's rows and their D."""
+    come first). A slot freed is reused by a later level. The design variables have
+    columns in the pool (``marching``, n_m of them: the boundary data, omega and the rigid
+    alignment, in which S is zero) except the lifted ones (``free``, n_f: a free
+    correspondence's controls, which the march does not read), whose reduced Jacobian is
+    J_d's columns plus F_u H (:class:`rffqm_nlp.stencils.Lift`, formed once a pass, lifted
+    rows x n_f, its rows gathered level by level into dense k x n_f).
+
+    Static: built once from the sparsity; ``J`` (n_r x (n_d + n_s), design columns then the
+    state in level order) has data = 1 + the index of each nonzero in the residuals'
+    Jacobian (its direct part). ``pattern`` (state rows) and ``weights`` are the metric's
+    rows and their D; ``free`` (design positions) and ``lifted_rows`` (the residual rows
+    F_u H reaches, in the Lift's order) are empty without a lift.
+    """
 
     def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
-                 weights: np.ndarray):
+                 weights: np.ndarray, free: np.ndarray, lifted_rows: np.ndarray):
         n_d, n_s = levels.n_d, levels.n_s
         self.levels = levels
         level = np.empty(n_s, dtype=np.int64)
@@ -304,10 +322,10 @@ class _Window:
         np.maximum.at(last, Jcoo.col[state] - n_d, at[Jcoo.row[state]])
         slot = self._slots(levels.bounds, last)
         self.pool = int(slot.max()) + 1 if n_s else 0
-        self.marching = np.unique(W.indices[~uses])
-        self.free = np.setdiff1d(np.arange(n_d), self.marching)
-        if self.free.size < FREE_COLUMNS:  # kept in the pool, as columns of zeros
-            self.marching, self.free = np.arange(n_d), np.zeros(0, dtype=np.int64)
+        if np.isin(free, W.indices[~uses]).any():
+            raise RuntimeError("a lifted design variable is read by the marching equations")
+        self.free = free
+        self.marching = np.setdiff1d(np.arange(n_d), free)
         n_m = self.marching.size
         column = np.full(n_d + n_s, -1, dtype=np.int64)  # -> pool row (-1: a free column)
         column[self.marching] = np.arange(n_m)
@@ -315,17 +333,22 @@ class _Window:
         free_column = np.full(n_d, -1, dtype=np.int64)
         free_column[self.free] = np.arange(self.free.size)
         width = n_m + self.pool
-        self._J_free = _Sliced(J[:, self.free])  # the free columns' reduced Jacobian
+        lifted = np.full(J.shape[0], -1, dtype=np.int64)  # -> row of the Lift (-1: none)
+        lifted[lifted_rows] = np.arange(lifted_rows.size)
         self._slot = slot
         self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
                         for lo, hi in levels.bounds]
         order = np.argsort(at, kind="stable")
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
-        self._residuals = {}  # level -> (rows, their pool and free parts, nonzeros' index)
+        # level -> (rows, their pool and free parts and their nonzeros' index in J, the
+        # lifted ones among the rows and their rows in the Lift)
+        self._residuals = {}
         for k, lo, hi in zip(range(-1, len(levels.bounds)), bounds[:-1], bounds[1:]):
             if hi > lo:
                 rows = order[lo:hi]
-                self._residuals[k] = (rows, *self._split(J[rows], column, free_column, width))
+                where = np.flatnonzero(lifted[rows] >= 0)
+                self._residuals[k] = (rows, *self._split(J[rows], column, free_column, width),
+                                      where, lifted[rows[where]])
         is_pattern = np.zeros(n_s, dtype=bool)
         is_pattern[pattern] = True
         root = np.zeros(n_s)
@@ -366,64 +389,73 @@ class _Window:
             free, size = free[take:], size + fresh.size
         return slot
 
-    def __call__(self, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...] | None:
+    def __call__(self, J: np.ndarray, r: np.ndarray,
+                 lift: Lift | None) -> tuple[np.ndarray, ...] | None:
         """(J' J, J' r, S_p' D_p S_p), in the design's order, at the residuals' Jacobian
-        nonzeros J and residuals r (n_r,), with the levels refilled at the same point;
-        None where they are not finite."""
+        nonzeros J (its direct part), its ``lift`` (columns in the order of ``free``) and
+        the residuals r (n_r,), with the levels refilled at the same point; None where they
+        are not finite."""
         n_m, n_f = self.marching.size, self.free.size
         pool = np.zeros((n_m + self.pool, n_m))  # [I; the working set of S]
         pool[:n_m] = np.eye(n_m)
         sums = _Sums(n_m, n_f)
-        self._reduce(-1, pool, J, r, sums)
+        lifted = None if lift is None else lift.product()  # (lifted rows, n_f)
+        self._reduce(-1, pool, J, r, lifted, sums)
         for k, ((lo, hi), W, (mine, root)) in enumerate(zip(self.levels.bounds, self._blocks,
                                                             self._pattern)):
             S = W @ pool
             pool[n_m + self._slot[lo:hi]] = S
             sums.metric.add(S[mine] * root[:, None])
-            self._reduce(k, pool, J, r, sums)
-        out = sums.total(self.marching, self.free, self._J_free(J), r)
+            self._reduce(k, pool, J, r, lifted, sums)
+        out = sums.total(self.marching, self.free)
         return out if all(np.all(np.isfinite(a)) for a in out) else None
 
     def _reduce(self, k: int, pool: np.ndarray, J: np.ndarray, r: np.ndarray,
-                sums: "_Sums") -> None:
-        """The residual rows reduced at level k added to the sums (in place)."""
+                lifted: np.ndarray | None, sums: "_Sums") -> None:
+        """The residual rows reduced at level k added to the sums (in place); ``lifted``:
+        F_u H in the lifted rows (None without a lift)."""
         if k in self._residuals:
-            rows, pooled, index, free, free_index = self._residuals[k]
+            rows, pooled, index, free, free_index, where, which = self._residuals[k]
             pooled.data[:] = J[index]
-            free.data[:] = J[free_index]
-            sums.add(pooled @ pool, free, r[rows])
+            if free.nnz:
+                free.data[:] = J[free_index]
+                Jf = free.toarray()
+            else:
+                Jf = np.zeros(free.shape)
+            if lifted is not None and where.size:
+                Jf[where] += lifted[which]
+            sums.add(pooled @ pool, Jf, r[rows])
 
 
 class _Sums:
-    """The sums of one pass over the levels: over the marching columns (n_m) the Gram
-    matrices of the reduced Jacobian's rows and of the metric's, J_m' r, and J_m' J_f
-    with the free columns (n_f)."""
+    """The sums of one pass over the levels: over the marching columns (n_m) and the free
+    ones (n_f) the Gram matrices of the reduced Jacobian's rows, their cross products
+    J_f' J_m and J' r, and over the marching columns the metric's Gram matrix."""
 
     def __init__(self, n_m: int, n_f: int):
-        self.jacobian, self.metric = _Gram(n_m), _Gram(n_m)
+        self.jacobian, self.metric, self.free = _Gram(n_m), _Gram(n_m), _Gram(n_f)
         self.cross = np.zeros((n_f, n_m))  # Jf' Jm
-        self.grad = np.zeros(n_m)
+        self.grad, self.free_grad = np.zeros(n_m), np.zeros(n_f)
 
-    def add(self, Jm: np.ndarray, Jf: sp.csr_matrix, r: np.ndarray) -> None:
-        """Residual rows: their reduced Jacobian in the marching columns Jm (k, n_m), in
-        the free ones Jf (k, n_f, sparse), their values r (k,)."""
+    def add(self, Jm: np.ndarray, Jf: np.ndarray, r: np.ndarray) -> None:
+        """Residual rows: their reduced Jacobian in the marching columns Jm (k, n_m) and in
+        the free ones Jf (k, n_f), their values r (k,)."""
         self.jacobian.add(Jm)
         self.grad += Jm.T @ r
-        if Jf.nnz:
+        if Jf.shape[1]:
+            self.free.add(Jf)
             self.cross += Jf.T @ Jm
+            self.free_grad += Jf.T @ r
 
-    def total(self, marching: np.ndarray, free: np.ndarray, Jf: sp.csr_matrix,
-              r: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f); ``Jf``
-        (n_r, n_f): the residuals' Jacobian in the free columns, their reduced Jacobian
-        (S is zero there); ``r`` (n_r,) the residuals."""
+    def total(self, marching: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f)."""
         n = marching.size + free.size
         JtJ, grad, M = np.zeros((n, n)), np.zeros(n), np.zeros((n, n))
         JtJ[np.ix_(marching, marching)] = self.jacobian.total()
         JtJ[np.ix_(free, marching)] = self.cross
         JtJ[np.ix_(marching, free)] = self.cross.T
-        JtJ[np.ix_(free, free)] = (Jf.T @ Jf).toarray()
-        grad[marching], grad[free] = self.grad, Jf.T @ r
+        JtJ[np.ix_(free, free)] = self.free.total()
+        grad[marching], grad[free] = self.grad, self.free_grad
         M[np.ix_(marching, marching)] = self.metric.total()
         return JtJ, grad, M
 
@@ -532,7 +564,8 @@ class Manifold:
         """The fixed blocks of J and G (the pattern of :meth:`_order_by_level`), the
         marching equations by level (:class:`_Levels`) and the pass that reduces J and the
         metric through them (:class:`_Window`)."""
-        J = self._jacobian_r.pattern().tocsr()
+        J = self._jacobian_r.pattern().tocsr()  # with a lift, its direct part
+        free, lifted_rows = self._lifted()
         self._J_design = _Sliced(J[:, self.design])
         self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]
@@ -547,7 +580,24 @@ class Manifold:
         sizes = np.cumsum([0] + [rows.size for rows in self.levels])
         self._sweeps = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
         self._window = _Window(self._sweeps, sp.hstack([J[:, self.design], J[:, self.state]]),
-                               self.pattern, self.pattern_weights)
+                               self.pattern, self.pattern_weights, free, lifted_rows)
+
+    def _lifted(self) -> tuple[np.ndarray, np.ndarray]:
+        """With a lifted residual Jacobian: the design positions of its lifted columns that
+        are not fixed (``_lift_keep`` indexes them among the Lift's columns) and the rows
+        F_u H reaches; both empty without one."""
+        none = np.zeros(0, dtype=np.int64)
+        self._lift_keep = self._free = none
+        if not isinstance(self._jacobian_r, LiftedJacobian):
+            return none, none
+        columns = self._jacobian_r.columns
+        if np.isin(columns, self.state).any():
+            raise RuntimeError("a lifted column of the residuals' Jacobian is a state variable")
+        position = np.full(self.nlp.x.numel(), -1, dtype=np.int64)
+        position[self.design] = np.arange(self.design.size)
+        self._lift_keep = np.flatnonzero(position[columns] >= 0)
+        self._free = position[columns[self._lift_keep]]
+        return self._free, self._jacobian_r.rows
 
     def _levels(self, off: sp.csr_matrix) -> np.ndarray:
         """The level of each marching equation (n_eq,): 0 for one that uses no other
@@ -586,18 +636,29 @@ class Manifold:
     def linearize(self, p: _Point) -> _Linearization | None:
         """The derivatives at p; None where they are not finite or the marching equations
         no longer determine their unknowns. Invalidates the last point's."""
-        J, G = self._jacobian_r(p.x), self._jacobian_g(p.x)
+        (J, lift), G = self._residual_jacobian(p.x), self._jacobian_g(p.x)
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
+            return None
+        if lift is not None and not (np.all(np.isfinite(lift.H))
+                                     and np.all(np.isfinite(lift.Fu.data))):
             return None
         if not self._sweeps.refill(G):
             return None
-        reduced = self._window(J, p.r)
+        reduced = self._window(J, p.r, lift)
         if reduced is None:
             return None
         return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
                               G_design=self._G_design(G), G_state=self._G_state(G),
                               levels=self._sweeps, JtJ=reduced[0], grad=reduced[1],
-                              pattern_metric=reduced[2])
+                              pattern_metric=reduced[2], lift=lift)
+
+    def _residual_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, Lift | None]:
+        """The nonzeros of the residuals' Jacobian at x (with a lift, of its direct part)
+        and its lift over the design's free columns (None without one)."""
+        if not isinstance(self._jacobian_r, LiftedJacobian):
+            return self._jacobian_r(x), None
+        J, lift = self._jacobian_r(x)
+        return J, Lift(lift.rows, lift.Fu, lift.H[:, self._lift_keep], self._free)
 
     def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The inequality rows of the reduced problem at (g, x): g's inequality rows, then
@@ -798,6 +859,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     augmented, scale, error, last = False, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
+        lin = m = None  # the last point's derivatives go before the next are built
         lin = man.linearize(p)
         if lin is None:
             status = "Stalled"

@@ -19,6 +19,13 @@ import numpy as np
 import scipy.sparse as sp
 
 
+def index_array(values: np.ndarray) -> np.ndarray:
+    """Non-negative integer ``values`` (float or int) as int32 where they fit, else int64:
+    the index arrays as long as a large Jacobian's nonzeros halve."""
+    top = values.max() if values.size else 0
+    return values.astype(np.int32 if top < np.iinfo(np.int32).max else np.int64)
+
+
 @dataclass(frozen=True)
 class Stencil:
     """g[rows[i]] = function(x[columns[i]], params[i]) for the n instances i.
@@ -147,7 +154,9 @@ class LocalJacobian:
         entries = [m.entries() for m in mapped] + [(c.rows, c.columns) for c in self.constants]
         key = np.concatenate([cols * n_g + rows for rows, cols in entries])
         del entries
-        key, self._position = np.unique(key, return_inverse=True)
+        key, position = np.unique(key, return_inverse=True)
+        self._position = index_array(position)  # as long as the instances' nonzeros
+        del position
         col, row = np.divmod(key, n_g)
         self._pattern = sp.csc_matrix((np.arange(1, key.size + 1, dtype=float), (row, col)),
                                       shape=self.shape)
@@ -169,67 +178,88 @@ class LocalJacobian:
         return np.bincount(self._position, weights=values, minlength=self._pattern.nnz)
 
 
+@dataclass(frozen=True)
+class Lift:
+    """The part F_u H of a :class:`LiftedJacobian` at a point: the rows that read u
+    (``rows``, (m,)), their Jacobian in u (``Fu``, (m, n_u), sparse), H = dh/dx in the
+    columns h reads (``H``, (n_u, k), dense) and those columns of x (``columns``, (k,)).
+    Kept as factors: the product is dense in its k columns."""
+
+    rows: np.ndarray
+    Fu: sp.csr_matrix
+    H: np.ndarray
+    columns: np.ndarray
+
+    def times(self, X: np.ndarray) -> np.ndarray:
+        """F_u H X[columns] (m,) or (m, p), its rows' change, for X (n_x,) or (n_x, p)."""
+        return self.Fu @ (self.H @ X[self.columns])
+
+    def transpose_times(self, w: np.ndarray) -> np.ndarray:
+        """(F_u H)' w[rows] (k,) or (k, p) for w (n_g,) or (n_g, p) over all rows."""
+        return self.H.T @ (self.Fu.T @ w[self.rows])
+
+    def product(self) -> np.ndarray:
+        """F_u H (m, k), dense: the lifted rows' Jacobian in the columns."""
+        return self.Fu @ self.H
+
+
 class LiftedJacobian:
     """The Jacobian (n_g x n_x) of rows f(x, u) at u = h(x), where h reads only a few
     columns of x (``columns``, k of them): J = F_x + F_u H, with F the
     :class:`LocalJacobian` ``inner`` over (x, u) (n_g x (n_x + n_u)) and H = dh/dx in those
     columns (n_u x k, dense).
 
-    ``lift``: x -> (u (n_u,), H (n_u, k)); ``reach`` (n_u, k), bool: H's structural
-    nonzeros. Where u is many intermediate values of a few variables (a free
-    correspondence's target lattice of its controls), F is local and cheap to build; the
-    Jacobian of f(x, h(x)) in x directly is dense in those few columns, and CasADi's build
-    of it is not cheap. The same interface as LocalJacobian: :meth:`pattern` and the
-    nonzeros at x.
+    ``lift``: x -> (u (n_u,), H (n_u, k)). Where u is many intermediate values of a few
+    variables (a free correspondence's target lattice of its controls), F is local and
+    cheap to build, while the Jacobian of f(x, h(x)) in x directly is dense in those few
+    columns, and CasADi's build of it is not cheap. So the two parts stay apart:
+    :meth:`pattern` gives F_x's sparsity (the rows' direct dependence on x) with data = 1 +
+    the index of each nonzero, and calling it at x gives F_x's nonzeros in that order and
+    the :class:`Lift` F_u H (what :mod:`rffqm_nlp.reduced` reduces without forming it).
     """
 
     def __init__(self, inner: LocalJacobian,
                  lift: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-                 columns: np.ndarray, reach: np.ndarray):
-        self.inner, self.shape = inner, (inner.shape[0], inner.shape[1] - reach.shape[0])
-        self._lift, self._columns, self._reach = lift, np.asarray(columns), reach
+                 columns: np.ndarray, n_x: int):
+        self.inner, self.columns = inner, np.asarray(columns, dtype=np.int64)
+        self.shape = (inner.shape[0], n_x)
+        self._lift = lift
         self._built = False
 
     def _build(self) -> None:
         if self._built:
             return
         n_x = self.shape[1]
-        F = self.inner.pattern()
-        Fx, Fu = F[:, :n_x].tocoo(), F[:, n_x:].tocsr()
-        self._lifted_rows = np.flatnonzero(np.diff(Fu.indptr))  # the rows that read u
+        F = self.inner.pattern()  # data = 1 + the index in the inner Jacobian's nonzeros
+        Fx = F[:, :n_x].tocsc()
+        Fx.sort_indices()
+        self._x_index = Fx.data.astype(np.int64) - 1
+        Fx.data = np.arange(1, Fx.nnz + 1, dtype=float)
+        self._pattern = Fx
+        Fu = F[:, n_x:].tocsr()
+        self._lifted_rows = np.flatnonzero(np.diff(Fu.indptr))
         Fu = Fu[self._lifted_rows]
-        # the nonzeros of F_u H: the lifted rows' entries in the columns that they reach
-        ones = sp.csr_matrix((np.ones(Fu.nnz), Fu.indices, Fu.indptr), shape=Fu.shape)
-        self._reached = (ones @ self._reach.astype(float)) > 0  # (lifted rows, k)
-        at_row, at_col = np.nonzero(self._reached)
-        rows = np.concatenate([Fx.row, self._lifted_rows[at_row]])
-        cols = np.concatenate([Fx.col, self._columns[at_col]])
-        key, position = np.unique(cols * self.shape[0] + rows, return_inverse=True)
-        col, row = np.divmod(key, self.shape[0])
-        self._pattern = sp.csc_matrix((np.arange(1, key.size + 1, dtype=float), (row, col)),
-                                      shape=self.shape)
-        self._pattern.sort_indices()
-        # where each of F_x's nonzeros and each reached entry of F_u H go, and which of the
-        # inner Jacobian's nonzeros they read
-        self._from_x = (position[:Fx.nnz], Fx.data.astype(np.int64) - 1)
-        self._to_lifted = position[Fx.nnz:]
+        Fu.sort_indices()
         self._Fu_index = Fu.data.astype(np.int64) - 1
-        self._Fu = sp.csr_matrix((np.zeros(Fu.nnz), Fu.indices, Fu.indptr), shape=Fu.shape)
+        self._Fu = Fu
         self._built = True
 
     def pattern(self) -> sp.csc_matrix:
-        """The sparsity, data = 1 + the index of each nonzero."""
+        """F_x's sparsity (n_g x n_x), data = 1 + the index of each nonzero."""
         self._build()
         return self._pattern.copy()
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """The nonzeros (nnz,) at x (n_x,)."""
+    @property
+    def rows(self) -> np.ndarray:
+        """The rows that read u (m,), in the order of the :class:`Lift`'s."""
+        self._build()
+        return self._lifted_rows
+
+    def __call__(self, x: np.ndarray) -> tuple[np.ndarray, Lift]:
+        """F_x's nonzeros (nnz,) and F_u H at x (n_x,)."""
         self._build()
         u, H = self._lift(x)
         values = self.inner(np.concatenate([x, u]))
-        out = np.zeros(self._pattern.nnz)
-        to, index = self._from_x
-        out[to] = values[index]
-        self._Fu.data[:] = values[self._Fu_index]
-        out[self._to_lifted] += (self._Fu @ H)[self._reached]
-        return out
+        Fu = self._Fu.copy()
+        Fu.data = values[self._Fu_index]
+        return values[self._x_index], Lift(self._lifted_rows, Fu, H, self.columns)

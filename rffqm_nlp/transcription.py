@@ -352,14 +352,6 @@ class Correspondence:
                             for k in range(3)])
         return T.ravel(), H
 
-    def target_reach(self) -> np.ndarray:
-        """(3 n, 2 Ku Kv), bool: the structural nonzeros of :meth:`target_values`' H."""
-        reach_u, reach_v = (ca.DM(s, 1).full().ravel() > 0 for s in (
-            self._first.sparsity_out(1), self._first.sparsity_out(2)))
-        L = self._lift != 0
-        return np.concatenate([np.concatenate([L & reach_u[k], L & reach_v[k]], axis=1)
-                               for k in range(3)])
-
     @cached_property
     def _first(self) -> ca.Function:
         """(u, v) -> (r, r_u, r_v) of the target surface."""
@@ -919,7 +911,7 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int
     if corr is None:
         return inner
     return stencils.LiftedJacobian(inner, lambda x: corr.target_values(x[controls]), controls,
-                                   corr.target_reach())
+                                   lay.size)
 
 
 def _boundary_columns(lay: _Layout) -> np.ndarray:

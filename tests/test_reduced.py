@@ -71,7 +71,7 @@ def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(
     lin = man.linearize(man.point(x))
     S = lin.state_change(np.eye(man.design.size))  # the forward sweep, column by column
     residuals = ca.Function("r", [nlp.x], [nlp.residuals])
-    Jr = lin.J_design.toarray() + lin.J_state @ S
+    Jr = lin.jacobian_times(np.eye(man.design.size))
     h = 1e-6
     for k in rng.choice(man.design.size, 12, replace=False):
         xp, xm = x.copy(), x.copy()
@@ -91,22 +91,21 @@ def test_the_level_pass_and_the_sweeps_match_the_dense_sensitivity(manifold, see
     """J' J, J' r and S_p' D_p S_p accumulated level by level in the working set
     (reduced._Window), S' by the backward sweep, and the inequality rows, against the
     products of the whole S (the forward sweep of the identity, checked against finite
-    differences above) to round-off; the working set is a part of the state."""
+    differences above) to round-off; the working set is a part of the state. The free
+    correspondence's controls are the lifted columns, reduced outside the pool."""
     _, man = manifold
-    assert man._window.free.size == 0  # the rigid alignment stays in the pool
+    nlp = man.nlp
+    unpinned = (nlp.lbx < nlp.ubx)[nlp.grid_index].sum()
+    assert unpinned == 16  # 4 x 4 controls of u and of v, their edges pinned
+    assert man._window.free.size == unpinned  # the rigid alignment stays in the pool
     _assert_level_pass_matches_dense(man, seed)
 
 
-def test_the_level_pass_with_free_columns_matches_the_dense_sensitivity(monkeypatch):
-    """The same with the design variables outside the march (the rigid alignment and a
-    free correspondence's controls) kept out of the pool."""
-    monkeypatch.setattr(reduced, "FREE_COLUMNS", 1)
-    prob, _ = small("sphere_cap")
-    nlp = prob.transcribe()
-    man = reduced.Manifold(nlp)
-    unpinned = (nlp.lbx < nlp.ubx)[nlp.grid_index].sum()
-    assert unpinned == 16  # 4 x 4 controls of u and of v, their edges pinned
-    assert man._window.free.size == 7 + unpinned  # the quaternion, the translation
+def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity():
+    """The same in the lattice mode: every design column in the pool."""
+    prob, _ = small("sphere_cap", correspondence="lattice")
+    man = reduced.Manifold(prob.transcribe())
+    assert man._window.free.size == 0
     for seed in (0, 1):
         _assert_level_pass_matches_dense(man, seed)
 
@@ -118,7 +117,7 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     p = man.point(nlp.project(x))
     lin = man.linearize(p)
     S = lin.state_change(np.eye(man.design.size))
-    Jr = lin.J_design.toarray() + lin.J_state @ S
+    Jr = lin.jacobian_times(np.eye(man.design.size))
     Sp = S[man.pattern] * np.sqrt(man.pattern_weights)[:, None]
 
     def close(mine, dense):
