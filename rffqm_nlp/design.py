@@ -720,13 +720,13 @@ MEMORY_BASE = 150e6
 #: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
 #: transcriptions with MUMPS' factor; "levenberg-marquardt": the NLP, its Jacobians from
 #: stencils and their blocks by level) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 26e3, "simultaneous": 190e3, "sequential": 250e3}
+MEMORY_PER_PANEL = {"levenberg-marquardt": 22e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... for Levenberg-Marquardt with a free correspondence this per panel more (the
-#: residuals' Jacobian reads the target lattice; measured 7.1 and 8.0 kB at 200 and 300
+#: residuals' Jacobian reads the target lattice; measured 3.3 and 3.6 kB at 200 and 300
 #: panels a side, docs/solvers.md) ...
-MEMORY_FREE_PER_PANEL = 7.5e3
+MEMORY_FREE_PER_PANEL = 3.5e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later
 #: level still needs, :class:`rffqm_nlp.reduced._Window`; fitted to 20 to 100 panels a side)

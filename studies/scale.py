@@ -4,13 +4,14 @@ A bundled target (``--target``, default the sphere cap) at n x n panels for each
 ``--sizes``, solved to ``--stop-rms`` (default 0.9% RMS/diameter, ``common.STOP_RMS``), each
 run ``DesignProblem.solve()`` in a fresh subprocess so that its time and peak memory are its
 own. With ``--previous REV`` the code of that git revision solves the same problems in the
-same run, at the sizes of ``--previous-sizes`` (those where it fits in memory). A size whose
+same run, at the sizes of ``--previous-sizes`` (those where it fits in memory);
+``--correspondence`` sets the design's (default: the target file's). A size whose
 memory estimate (``design.memory_estimate``) exceeds what the machine has is reported as
 refused, not run. The table gives the log-log slopes of wall time and of peak memory
 between consecutive sizes, against the number of panels n^2.
 
     python studies/scale.py [--sizes 20 40 100 200] [--previous REV --previous-sizes 20 40 100]
-        [--target sphere_cap] [--stop-rms 0.009] [--time-limit 3600]
+        [--target sphere_cap] [--correspondence lattice] [--stop-rms 0.009] [--time-limit 3600]
         [--out studies/results/scale.md]
     python studies/scale.py --smoke   (4 and 8 panels, temporary output)
 """
@@ -29,19 +30,19 @@ from rffqm_nlp.errors import InputError, one_line
 
 
 def run(target: str, n: int, stop_rms: float, time_limit: float,
-        package: Path | None) -> dict:
+        package: Path | None, overrides: dict) -> dict:
     """One solve in a fresh process (``package``: the exported code of an earlier
-    revision, None for this one); refused without running when this revision's
-    :func:`rffqm_nlp.design.check_memory` refuses it."""
+    revision, None for this one; ``overrides``: [design] keys); refused without running when
+    this revision's :func:`rffqm_nlp.design.check_memory` refuses it."""
     if package is None:
         try:
-            design.check_memory(*target_problem(target, n))
+            design.check_memory(*target_problem(target, n, **overrides))
         except InputError as exc:
             return {"n": n, "status": f"refused: {one_line(exc)}", "wall": None,
                     "peak_rss_mb": None}
     env = None if package is None else {"PYTHONPATH": str(package)}
-    return solve_in_child(target, n, solve={"stop_rms": stop_rms, "time_limit": time_limit},
-                          env=env)
+    return solve_in_child(target, n, design=overrides or None,
+                          solve={"stop_rms": stop_rms, "time_limit": time_limit}, env=env)
 
 
 def slope(a: dict | None, b: dict, key: str) -> str:
@@ -79,6 +80,7 @@ def main() -> None:
     ap.add_argument("--previous", default=None)
     ap.add_argument("--previous-sizes", type=int, nargs="*", default=[20, 40, 100])
     ap.add_argument("--target", default="sphere_cap", choices=TARGETS)
+    ap.add_argument("--correspondence", default=None, choices=["free", "lattice"])
     ap.add_argument("--stop-rms", type=float, default=STOP_RMS)
     ap.add_argument("--time-limit", type=float, default=3600.0)
     ap.add_argument("--out", type=Path, default=RESULTS / "scale.md")
@@ -91,19 +93,21 @@ def main() -> None:
     packages = {"this": None}
     if args.previous:
         packages[args.previous] = export_package(args.previous)
+    overrides = {} if args.correspondence is None else {"correspondence": args.correspondence}
     rows = []
     for n in args.sizes:
         for code, package in packages.items():
             if package is not None and n not in args.previous_sizes:
                 continue
-            r = run(args.target, n, args.stop_rms, args.time_limit, package)
+            r = run(args.target, n, args.stop_rms, args.time_limit, package, overrides)
             r.update(code=code, n=n)
             rows.append(r)
             print({k: r.get(k) for k in ("code", "n", "status", "iterations", "wall",
                                          "peak_rss_mb")}, flush=True)
     rows.sort(key=lambda r: (r["code"] != "this", r["n"]))
     text = "\n".join([
-        f"# Scale: {args.target} to {100 * args.stop_rms:.1f}% RMS/diameter", "",
+        f"# Scale: {args.target} to {100 * args.stop_rms:.1f}% RMS/diameter"
+        + ("" if not overrides else f", {args.correspondence} correspondence"), "",
         clock.header(), "",
         "Command: `" + " ".join(["python studies/scale.py", *sys.argv[1:]]) + "`", "",
         "code: this revision, or the revision named. wall: seconds of `prob.solve()` "
