@@ -338,10 +338,13 @@ class DesignProblem:
 
         ``weights`` override the problem's; ``initial`` (a result of a problem of the same
         size, in either transcription) replaces the Miura as the initial guess, while the
-        Miura stays the Tikhonov reference and fixes the mountain-valley pattern.
+        Miura stays the Tikhonov reference and fixes the mountain-valley pattern; with a
+        free correspondence, its map too when it was solved with one on the same domain
+        (:meth:`_initial_controls`).
         """
         start = start or self.start()
-        guess = start
+        guess, corr = start, self._correspondence()
+        controls = None
         if initial is not None:
             if initial.boundary.N != 2 * self.N or initial.boundary.M != 2 * self.M:
                 raise InputError(f"the initial guess has {initial.boundary.N} x "
@@ -349,14 +352,31 @@ class DesignProblem:
             guess = Start(boundary=initial.boundary, omega=initial.omega,
                           target_points=start.target_points, spacing=start.spacing,
                           rotation=initial.rotation, translation=initial.translation)
+            controls = self._initial_controls(initial, corr)
         setup = transcription.Setup(
             boundary=guess.boundary, omega=guess.omega, rotation=guess.rotation,
             translation=guess.translation, target=start.target_points, spacing=start.spacing,
             weights=weights or self.weights, min_angle=self.min_angle,
             min_length=self.min_length, mu_margin=self.mu_margin,
             omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
-            reference_omega=start.omega, correspondence=self._correspondence())
+            reference_omega=start.omega, correspondence=corr, controls=controls)
         return getattr(transcription, (options or SolveOptions()).transcription)(setup)
+
+    def _initial_controls(self, initial: DesignResult,
+                          corr: transcription.Correspondence | None) -> np.ndarray | None:
+        """The controls of ``initial``'s free correspondence (read from its design vector,
+        :func:`rffqm_nlp.transcription.controls_of`) when this problem has one of the same
+        size and they lie within its bounds (the domain, the edges pinned); else None (the
+        map starts uniform)."""
+        design, solve = (initial.problem.get(k, {}) for k in ("design", "solve"))
+        if corr is None or design.get("correspondence") != "free":
+            return None
+        controls = transcription.controls_of(
+            initial.x, SolveOptions.from_config(solve).transcription, corr.size)
+        lower, upper = corr.bounds()
+        if controls.size != corr.size or np.any(controls < lower) or np.any(controls > upper):
+            return None
+        return controls
 
     def _correspondence(self) -> transcription.Correspondence | None:
         """The free correspondence from the uniform grid (None with "lattice")."""
@@ -371,8 +391,9 @@ class DesignProblem:
         corr = self._correspondence()
         if corr is None:
             return None
-        nlp = self.transcribe(options=SolveOptions.from_config(result.problem["solve"]))
-        return corr.grid(*corr.views(np.asarray(result.x)[nlp.grid_index]))
+        controls = transcription.controls_of(
+            result.x, SolveOptions.from_config(result.problem["solve"]).transcription, corr.size)
+        return corr.grid(*corr.views(controls))
 
     # ------------------------------------------------------------------ solve
     def solve(self, options: SolveOptions | None = None, *,
@@ -385,7 +406,8 @@ class DesignProblem:
         ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration
         ("elapsed": seconds since the solve started).
         ``warm_start``: a result of a problem of the same size to start from instead of the
-        Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern).
+        Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern; a
+        free correspondence's map is kept, see :meth:`transcribe`).
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
         Raises :class:`InputError` before any work when the solve needs more memory than

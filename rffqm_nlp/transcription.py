@@ -431,6 +431,11 @@ class Setup:
     reference: BoundaryData  # the Miura start: Tikhonov reference and MV pattern
     reference_omega: float
     correspondence: Correspondence | None = None  # None: the target lattice is fixed
+    controls: np.ndarray | None = None  # a warm start's controls (None: the uniform grid's)
+
+    def controls0(self) -> np.ndarray:
+        """The initial guess's controls of the free correspondence (2 Ku Kv,)."""
+        return self.correspondence.start() if self.controls is None else self.controls
 
     @property
     def reference_vector(self) -> np.ndarray:
@@ -547,7 +552,7 @@ def sequential(setup: Setup) -> NLP:
     inputs = [tri[:, :N + 1], tri[:, N + 1:], lengths[:, :N], lengths[:, N:]]
     Y = folded_function(N, M).call([*inputs, omega])
     x0 = np.concatenate([bd0.to_vector(), [setup.omega], setup.rigid0()]
-                        + ([] if corr is None else [corr.start()]))
+                        + ([] if corr is None else [setup.controls0()]))
     res = _objective_residuals(setup, shape.coarse_grain(Y), x[groups["rigid"]],
                                x[:2 * nv + nl + 1], grid)
     # Inline constraints on the marched pattern.
@@ -720,6 +725,16 @@ def _crease_quaternion_signs(alpha, beta, sigma, phi) -> np.ndarray:
     return row * np.vstack([np.ones((1, M)), col])
 
 
+def controls_of(x: np.ndarray, transcription: str, size: int) -> np.ndarray:
+    """A free correspondence's controls (size,) in a design vector x of ``transcription``:
+    the last entries in the sequential one, just before omega and the rigid alignment (the
+    last 8) in the simultaneous one (the layouts of :func:`sequential` and
+    :func:`simultaneous`, their ``grid_index``)."""
+    x = np.asarray(x, dtype=float)
+    end = x.size if transcription == "sequential" else x.size - 8
+    return x[end - size:end]
+
+
 def simultaneous(setup: Setup) -> NLP:
     """The simultaneous transcription: every vertex angle, side, edge direction, panel
     rotation (quaternion) and folded vertex is a variable, and the marching equations are
@@ -816,7 +831,7 @@ def simultaneous(setup: Setup) -> NLP:
         return out
 
     x0 = point(start, setup.omega, setup.rigid0(),
-               np.zeros(0) if corr is None else corr.start())
+               np.zeros(0) if corr is None else setup.controls0())
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     if corr is not None:
         lbx[grid_index], ubx[grid_index] = corr.bounds()

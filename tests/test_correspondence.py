@@ -231,6 +231,41 @@ def test_a_free_result_saves_and_reloads(free, tmp_path):
         np.testing.assert_array_equal(mine, theirs)
 
 
+@pytest.mark.parametrize("transcription_name", ["simultaneous", "sequential"])
+def test_the_controls_are_found_in_either_transcriptions_design_vector(transcription_name):
+    problem, _ = bundled("hyperboloid", correspondence="free")
+    nlp = problem.transcribe(options=SolveOptions(solver="ipopt",
+                                                  transcription=transcription_name))
+    x = np.random.default_rng(0).standard_normal(nlp.x0.size)
+    np.testing.assert_array_equal(
+        transcription.controls_of(x, transcription_name, nlp.grid_index.size), x[nlp.grid_index])
+
+
+def test_a_warm_start_keeps_the_free_map_and_returns_at_once(free):
+    """The warm start begins at the result's controls, not the uniform grid's, so it is
+    at the optimum already; a result solved on another domain, or in the lattice mode,
+    leaves the map uniform."""
+    problem, result = free
+    controls = transcription.controls_of(result.x, "simultaneous", 32)
+    uniform = problem.transcribe()
+    assert np.abs(controls - uniform.x0[uniform.grid_index]).max() > 1e-3  # the map moved
+    for name in ("simultaneous", "sequential"):
+        nlp = problem.transcribe(initial=result,
+                                 options=SolveOptions(solver="ipopt", transcription=name))
+        np.testing.assert_array_equal(nlp.x0[nlp.grid_index], controls)
+    again = problem.solve(warm_start=result)
+    assert again.stats.status == "Solve_Succeeded" and again.stats.iterations <= 1
+    assert again.stats.objective == pytest.approx(result.stats.objective, rel=1e-6)
+    elsewhere = replace(problem, target=rq.surfaces.get(
+        "hyperboloid", domain=((-0.6, 0.6), (-0.8, 0.8)), a=2.0, b=2.0, c=2.0))
+    nlp, cold = elsewhere.transcribe(initial=result), elsewhere.transcribe()
+    np.testing.assert_array_equal(nlp.x0[nlp.grid_index], cold.x0[cold.grid_index])
+    lattice_result = replace(result, problem={**result.problem, "design": {
+        **result.problem["design"], "correspondence": "lattice"}})
+    nlp = problem.transcribe(initial=lattice_result)
+    np.testing.assert_array_equal(nlp.x0[nlp.grid_index], uniform.x0[uniform.grid_index])
+
+
 def test_the_memory_estimate_counts_the_controls_for_levenberg_marquardt():
     """The free correspondence adds MEMORY_FREE_PER_PANEL a panel and 2 GRID_CONTROLS^2
     design variables however large the pattern: under a fifth more than the lattice
