@@ -162,7 +162,7 @@ def test_the_jacobian_is_casadis_with_valley_vertex_signs(seed):
     start = prob.start()
     nlp = prob.transcribe(initial=SimpleNamespace(
         boundary=bd, omega=start.omega, rotation=start.rotation,
-        translation=start.translation))
+        translation=start.translation, problem={}))  # no recorded problem: no map to keep
     x = nlp.x0 + 0.05 * np.random.default_rng(seed).standard_normal(nlp.x0.size)
     assert_same(assembled(nlp.g_jacobian, x), casadi_jacobian(nlp, x))
 
