@@ -14,7 +14,6 @@ options: docs/solvers.md.
 
 from __future__ import annotations
 
-import os
 import re
 import time
 from dataclasses import dataclass, field, fields, replace
@@ -24,7 +23,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-from . import clearance, numpy_model, reduced, shape, surfaces, transcription
+from . import clearance, memory, numpy_model, reduced, shape, surfaces, transcription
 from .boundary import LAYOUTS, BoundaryData, miura_boundary
 from .collisions import collisions
 from .curvature import curvature_maps
@@ -790,52 +789,15 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     return int(min(need, 2.0 ** 62))
 
 
-def available_memory() -> int | None:
-    """Bytes this process can still use: /proc/meminfo's MemAvailable (else the free
-    physical pages), lowered to what a cgroup (v2) memory limit leaves; None if unknown."""
-    have = None
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    have = int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    if have is None:
-        try:
-            have = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        except (ValueError, OSError, AttributeError):
-            return None
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        used = int(Path("/sys/fs/cgroup/memory.current").read_text())
-        if limit != "max":
-            have = min(have, int(limit) - used)
-    except (OSError, ValueError):
-        pass
-    return max(have, 0)
-
-
 def check_memory(problem: DesignProblem, options: SolveOptions | None = None) -> None:
     """Refuse, before any work, a solve that needs more memory (:func:`memory_estimate`)
-    than this machine has available (:func:`available_memory`): one :class:`InputError`
-    line with the estimate and the limit."""
+    than this machine has available (:func:`rffqm_nlp.memory.available`): one
+    :class:`InputError` line with the estimate and the limit."""
     options = options or SolveOptions()
-    need, have = memory_estimate(problem, options), available_memory()
-    if have is not None and need > have:
-        P, Q = problem.panels
-        raise InputError(f"[design] panels = [{P}, {Q}] needs about {_gigabytes(need)} GB with "
-                         f"solver {options.solver}; this machine has {_gigabytes(have)} GB "
-                         "available; choose fewer panels")
-
-
-def _gigabytes(size: float) -> str:
-    """A size in GB for a message: "0.35", "22", "4.1e5"."""
-    gb = size / 1e9
-    if gb < 1000:
-        return f"{gb:.2g}"
-    mantissa, exponent = f"{gb:.1e}".split("e")
-    return f"{mantissa}e{int(exponent)}"
+    P, Q = problem.panels
+    memory.refuse_beyond(memory_estimate(problem, options),
+                         f"[design] panels = [{P}, {Q}] with solver {options.solver}",
+                         "choose fewer panels")
 
 
 def collision_fields(pattern: Pattern, omega: float) -> dict[str, Any]:

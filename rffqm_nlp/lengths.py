@@ -28,7 +28,10 @@ those linear maps. Two ways to choose ell over the same feasible set
     max-min solution.
 
 :func:`side_length_nlp` returns a :class:`SideLengthSolution` (the boundary data and
-what IPOPT reported); :func:`length_spread` summarises a pattern's sides.
+what IPOPT reported); :func:`length_spread` summarises a pattern's sides. Both refuse,
+before any work, a pattern whose program needs more memory than the machine has
+(:func:`check_memory`): their constraint matrices are dense in ell, so they grow like
+N M (N + M).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import linprog
 
+from . import memory
 from .boundary import BoundaryData
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
 from .files import Key, check_value
@@ -108,6 +112,32 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
     return LengthMaps(Lh=Lh, Lv=Lv)
 
 
+# --------------------------------------------------------------------------- memory
+#: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
+#: each program holds at its peak, on top of :data:`MEMORY_BASE`. Measured peaks (one run
+#: each, 2026-12-02): HiGHS' LP 0.55 and 3.5 GB at 100 and 200 panels a side (8 and 79 s),
+#: IPOPT's max-min NLP 0.41 and 1.09 GB at 50 and 70 (13 and 39 s), its bytes per unit
+#: still growing there
+MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
+#: what every run holds besides (Python, CasADi, SciPy)
+MEMORY_BASE = 150e6
+
+
+def memory_estimate(N: int, M: int, program: str) -> float:
+    """Bytes that :func:`side_length_lp` (``program`` "lp") or :func:`side_length_nlp`
+    ("nlp") needs for N x M panels: MEMORY_BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
+    return MEMORY_BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
+
+
+def check_memory(bd: BoundaryData, program: str) -> None:
+    """Refuse, before any work, side lengths of ``bd``'s pattern that this machine cannot
+    hold (:func:`memory_estimate`): one :class:`InputError` line."""
+    name = {"lp": "side_length_lp", "nlp": "side_length_nlp"}[program]
+    memory.refuse_beyond(memory_estimate(bd.N, bd.M, program),
+                         f"{name} on {bd.N} x {bd.M} panels",
+                         "choose fewer panels, or lengths without the program")
+
+
 # --------------------------------------------------------------------------- the LP
 def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
                    delta: float | None = None) -> BoundaryData:
@@ -116,10 +146,12 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
     ``eps`` is the lower bound on every computed side; the result is ell* + delta 1 with
     ``delta`` (default: the smaller of eps and half the admissible shift) keeping every side
     positive. Raises :class:`InfeasibleDesign` when no positive lengths exist for these
-    angles, :class:`MarchingError` when the angles themselves fail.
+    angles, :class:`MarchingError` when the angles themselves fail, :class:`InputError`
+    when this machine cannot hold the LP (:func:`check_memory`).
     """
     if not (np.isfinite(eps) and eps > 0):
         raise InputError(f"eps must be a finite positive length, got {eps!r}")
+    check_memory(bd, "lp")
     A = length_maps(bd).interior
     n = A.shape[1]
     res = linprog(np.ones(n), A_ub=-A, b_ub=-eps * np.ones(A.shape[0]), bounds=(0, None),
@@ -170,7 +202,8 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
     side >= min_length * mean (in particular when no valid pattern exists for these
     angles), :class:`SolverFailed` with IPOPT's status when IPOPT does not succeed,
     :class:`MarchingError` when the angles themselves fail the marching checks and
-    :class:`InputError` on invalid arguments.
+    :class:`InputError` on invalid arguments or a program this machine cannot hold
+    (:func:`check_memory`).
     """
     if not isinstance(bd, BoundaryData):
         raise InputError(f"side_length_nlp expects BoundaryData, got {type(bd).__name__}")
@@ -179,6 +212,7 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
                              _MIN_LENGTH, "min_length")
     tol = check_value(tol, Key("number", low=0, low_open=True), "tol")
     max_iter = check_value(max_iter, Key("whole", low=1), "max_iter")
+    check_memory(bd, "nlp")
     A = length_maps(bd).all_sides
     mean_row = A.mean(axis=0)
     if not np.any(np.abs(mean_row) > 0):

@@ -19,7 +19,7 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import design, files, sweeps
+from rffqm_nlp import design, files, lengths, memory, sweeps
 from rffqm_nlp.cli import app
 from rffqm_nlp.errors import InputError
 
@@ -280,13 +280,13 @@ def test_a_size_this_machine_cannot_hold_is_refused_before_any_work(tmp_path, no
     out = tmp_path / "out"
     t0 = time.perf_counter()
     line = assert_one_line(run_design(path, out), [
-        "[design] panels = [100000, 100000] needs about", "GB with solver levenberg-marquardt",
+        "[design] panels = [100000, 100000] with solver levenberg-marquardt needs about",
         "GB available; choose fewer panels"])
     assert time.perf_counter() - t0 < 1.0
     assert not out.exists()
     problem, options = rq.load_design(path)
     need = design.memory_estimate(problem, options)
-    assert f"needs about {design._gigabytes(need)} GB" in line
+    assert f"needs about {memory.gigabytes(need)} GB" in line
     with pytest.raises(InputError, match="choose fewer panels"):
         problem.solve(options)
     with pytest.raises(InputError, match="with solver ipopt"):
@@ -302,6 +302,47 @@ def test_the_panels_override_of_the_command_is_checked_too(tmp_path, no_work):
     assert_one_line(run_design(path, out, "--panels", "100000,100000"), ["choose fewer panels"])
     assert_one_line(run_design(path, out, "--panels", "8,7"), ["[design] panels[1]"])
     assert not out.exists()
+
+
+@pytest.mark.parametrize("program", ["lp", "nlp"])
+def test_side_lengths_this_machine_cannot_hold_are_refused_before_any_work(program,
+                                                                            monkeypatch):
+    """The side-length programs' dense maps grow like N M (N + M): a 3000 x 3000 pattern
+    (about 6e3 GB) is refused in one line before the maps are built."""
+    def maps(bd):
+        raise AssertionError("the length maps were built")
+    monkeypatch.setattr(lengths, "length_maps", maps)
+    bd = rq.miura_boundary(3000, 3000, a=1.0, b=1.3, alpha0=1.1)
+    solve = lengths.side_length_lp if program == "lp" else lengths.side_length_nlp
+    with pytest.raises(InputError) as info:
+        solve(bd)
+    line = str(info.value)
+    need = lengths.memory_estimate(3000, 3000, program)
+    assert "\n" not in line and f"on 3000 x 3000 panels needs about {memory.gigabytes(need)} GB" \
+        in line and line.endswith("choose fewer panels, or lengths without the program")
+
+
+def test_the_march_command_refuses_an_lp_it_cannot_hold(tmp_path, monkeypatch):
+    """`rffqm march --lp` on a pattern this machine cannot hold: exit status 2, one line,
+    no output folder, before the maps are built."""
+    def maps(bd):
+        raise AssertionError("the length maps were built")
+    monkeypatch.setattr(lengths, "length_maps", maps)
+    out = tmp_path / "march"
+    res = runner.invoke(app, ["march", "--rows", "3000", "--cols", "3000", "--lp",
+                              "--out", str(out)])
+    assert_one_line(res, ["side_length_lp on 3000 x 3000 panels needs about",
+                          "GB available; choose fewer panels"])
+    assert not out.exists()
+
+
+def test_the_side_length_memory_model_matches_the_measured_peaks():
+    """lengths.MEMORY_PER_UNIT: HiGHS' LP peaked at 0.55 and 3.5 GB at 100 and 200 panels a
+    side, IPOPT's max-min NLP at 1.09 GB at 70 (2026-12-02)."""
+    gb = lambda n, program: lengths.memory_estimate(n, n, program) / 1e9  # noqa: E731
+    assert gb(100, "lp") == pytest.approx(0.55, rel=0.15)
+    assert gb(200, "lp") == pytest.approx(3.5, rel=0.15)
+    assert gb(70, "nlp") == pytest.approx(1.09, rel=0.15)
 
 
 def test_memory_model_matches_the_measured_peaks():
