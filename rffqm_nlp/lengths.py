@@ -135,7 +135,7 @@ def check_memory(bd: BoundaryData, program: str) -> None:
     name = {"lp": "side_length_lp", "nlp": "side_length_nlp"}[program]
     memory.refuse_beyond(memory_estimate(bd.N, bd.M, program),
                          f"{name} on {bd.N} x {bd.M} panels",
-                         "choose fewer panels, or lengths without the program")
+                         "choose fewer panels or keep the given side lengths")
 
 
 # --------------------------------------------------------------------------- the LP

@@ -319,7 +319,7 @@ def test_side_lengths_this_machine_cannot_hold_are_refused_before_any_work(progr
     line = str(info.value)
     need = lengths.memory_estimate(3000, 3000, program)
     assert "\n" not in line and f"on 3000 x 3000 panels needs about {memory.gigabytes(need)} GB" \
-        in line and line.endswith("choose fewer panels, or lengths without the program")
+        in line and line.endswith("choose fewer panels or keep the given side lengths")
 
 
 def test_the_march_command_refuses_an_lp_it_cannot_hold(tmp_path, monkeypatch):
