@@ -308,7 +308,7 @@ def test_the_panels_override_of_the_command_is_checked_too(tmp_path, no_work):
 def test_side_lengths_this_machine_cannot_hold_are_refused_before_any_work(program,
                                                                             monkeypatch):
     """The side-length programs' dense maps grow like N M (N + M): a 3000 x 3000 pattern
-    (about 6e3 GB) is refused in one line before the maps are built."""
+    (over 10,000 GB) is refused in one line before the maps are built."""
     def maps(bd):
         raise AssertionError("the length maps were built")
     monkeypatch.setattr(lengths, "length_maps", maps)
