@@ -745,8 +745,7 @@ MEMORY_PER_PANEL = {"levenberg-marquardt": 22e3, "simultaneous": 190e3, "sequent
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... for Levenberg-Marquardt with a free correspondence this per panel more (the
-#: residuals' Jacobian reads the target lattice; measured 3.3 and 3.6 kB at 200 and 300
-#: panels a side, docs/solvers.md) ...
+#: residuals' Jacobian reads the target lattice; fitted to the peaks in docs/solvers.md) ...
 MEMORY_FREE_PER_PANEL = 3.5e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later

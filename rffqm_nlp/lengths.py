@@ -114,10 +114,9 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
 
 # --------------------------------------------------------------------------- memory
 #: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
-#: each program holds at its peak, on top of :data:`MEMORY_BASE`. Measured peaks (one run
-#: each, 2026-12-02): HiGHS' LP 0.55 and 3.5 GB at 100 and 200 panels a side (8 and 79 s),
-#: IPOPT's max-min NLP 0.41 and 1.09 GB at 50 and 70 (13 and 39 s), its bytes per unit
-#: still growing there
+#: each program holds at its peak, on top of :data:`MEMORY_BASE`; fitted to the peaks in
+#: docs/solvers.md ("Memory estimate"), the NLP's rounded up (its bytes per unit still grew
+#: at the largest size measured)
 MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
 #: what every run holds besides (Python, CasADi, SciPy)
 MEMORY_BASE = 150e6

@@ -587,7 +587,7 @@ class Manifold:
         are not fixed (``_lift_keep`` indexes them among the Lift's columns) and the rows
         F_u H reaches; both empty without one."""
         none = np.zeros(0, dtype=np.int64)
-        self._lift_keep = self._free = none
+        self._lift_keep = none
         if not isinstance(self._jacobian_r, LiftedJacobian):
             return none, none
         columns = self._jacobian_r.columns
@@ -596,8 +596,7 @@ class Manifold:
         position = np.full(self.nlp.x.numel(), -1, dtype=np.int64)
         position[self.design] = np.arange(self.design.size)
         self._lift_keep = np.flatnonzero(position[columns] >= 0)
-        self._free = position[columns[self._lift_keep]]
-        return self._free, self._jacobian_r.rows
+        return position[columns[self._lift_keep]], self._jacobian_r.rows
 
     def _levels(self, off: sp.csr_matrix) -> np.ndarray:
         """The level of each marching equation (n_eq,): 0 for one that uses no other
@@ -658,7 +657,7 @@ class Manifold:
         if not isinstance(self._jacobian_r, LiftedJacobian):
             return self._jacobian_r(x), None
         J, lift = self._jacobian_r(x)
-        return J, Lift(lift.rows, lift.Fu, lift.H[:, self._lift_keep], self._free)
+        return J, Lift(lift.rows, lift.Fu, lift.H[:, self._lift_keep], self._window.free)
 
     def inequalities(self, g: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The inequality rows of the reduced problem at (g, x): g's inequality rows, then

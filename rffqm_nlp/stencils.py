@@ -260,6 +260,6 @@ class LiftedJacobian:
         self._build()
         u, H = self._lift(x)
         values = self.inner(np.concatenate([x, u]))
-        Fu = self._Fu.copy()
-        Fu.data = values[self._Fu_index]
+        Fu = sp.csr_matrix((values[self._Fu_index], self._Fu.indices, self._Fu.indptr),
+                           shape=self._Fu.shape)  # the pattern's structure, new values
         return values[self._x_index], Lift(self._lifted_rows, Fu, H, self.columns)
