@@ -242,6 +242,31 @@ def folded_function(N: int, M: int) -> ca.Function:
                        [*pattern.name_in(), "omega"], ["Yx", "Yy", "Yz"])
 
 
+@lru_cache(maxsize=None)
+def marched_function(N: int, M: int) -> ca.Function:
+    """Boundary data and omega -> the crease pattern and its folded state, as one CasADi
+    Function: :func:`pattern_function`, then the kinematics of :func:`fold_function` and
+    :func:`panel_quaternions_function` on the marched pattern (one evaluation where the
+    three would march and fold twice).
+
+    Inputs: ``left, bottom, l_left, l_bottom`` as in :func:`pattern_function`, ``omega``.
+    Outputs: ``alpha, beta, sigma, lh, lv, mu, alpha_d`` as in :func:`pattern_function`,
+    ``theta_h`` (:func:`edge_directions`, N+1 x M+1), the panel quaternions ``Qw, Qx, Qy,
+    Qz`` (N x M) and the folded vertices ``Yx, Yy, Yz`` (N+1 x M+1).
+    """
+    pattern = pattern_function(N, M)
+    inputs = pattern.mx_in()
+    alpha, beta, sigma, lh, lv, mu, alpha_d, _, _ = pattern.call(inputs)
+    omega = ca.MX.sym("omega")
+    Y, quat = _fold_expr(alpha, beta, sigma, lh, lv, omega)
+    return ca.Function(
+        "marched", [*inputs, omega],
+        [alpha, beta, sigma, lh, lv, mu, alpha_d, edge_directions(alpha, beta), *quat, *Y],
+        [*pattern.name_in(), "omega"],
+        ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "theta_h",
+         "Qw", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"])
+
+
 def crease_quaternions(alpha: ca.MX, beta: ca.MX, sigma: ca.MX, theta_h: ca.MX,
                        omega: Scalar) -> tuple[Quaternion, Quaternion]:
     """Rotation quaternions of the creases the kinematics march crosses (eq:defGrads).
@@ -341,7 +366,7 @@ def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
     if not isinstance(pat, Pattern):
         raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")
     om = check_omega(omega)
-    ev = _Evaluation(fold_function(pat.N, pat.M),
+    ev = Evaluation(fold_function(pat.N, pat.M),
                      [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
     states = []
     for w in np.atleast_1d(om):
@@ -351,11 +376,11 @@ def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
 
 
 def evaluate(f: ca.Function, args: list) -> list[np.ndarray]:
-    """Evaluate ``f`` once on NumPy inputs; dense NumPy outputs (see :class:`_Evaluation`)."""
-    return _Evaluation(f, args).run()
+    """Evaluate ``f`` once on NumPy inputs; dense NumPy outputs (see :class:`Evaluation`)."""
+    return Evaluation(f, args).run()
 
 
-class _Evaluation:
+class Evaluation:
     """A CasADi Function evaluated on NumPy arrays in place, through its buffer.
 
     This skips the DM conversions of ``Function.call``, a large share of the time of a large

@@ -4,9 +4,10 @@ The simultaneous NLP (:func:`rffqm_nlp.transcription.simultaneous`) states the m
 equations c(x) = 0 as constraints, and IPOPT's iterates meet them only near the optimum.
 Here every iterate is a marched design: the variables are the design d (boundary angles and
 sides, omega, the rigid alignment) and every other entry of x, the state s, follows from d
-by the march (the NumPy model, :attr:`NLP.project`). The loss is then a least-squares
-function of d alone, f(d) = 0.5 |r(d, s(d))|^2, and its Gauss-Newton model is exact to
-first order: no constraint curvature is dropped.
+by the march (:attr:`NLP.project`, the CasADi graph; the answer is re-marched with the
+NumPy model). The loss is then a least-squares function of d alone, f(d) = 0.5 |r(d,
+s(d))|^2, and its Gauss-Newton model is exact to first order: no constraint curvature is
+dropped.
 
 Derivatives come from the simultaneous NLP's sparse Jacobians, evaluated once per accepted
 point into preallocated buffers (trial points evaluate only r and g). The marching

@@ -29,9 +29,8 @@ from . import numpy_model, shape, stencils
 from . import vertex as vx
 from .backend import Scalar
 from .boundary import BoundaryData
-from .errors import InputError, MarchingError
-from .marching import (boundary_inputs, crease_quaternion, edge_directions, evaluate,
-                       fold_function, folded_function, panel_cell, panel_quaternions_function,
+from .marching import (Evaluation, boundary_inputs, crease_quaternion, evaluate,
+                       folded_function, locate_failure, marched_function, panel_cell,
                        pattern_function, qmul, rotate_planar, rotated_edges)
 
 PI = np.pi
@@ -54,8 +53,9 @@ class NLP:
     #: Function of x: the folded vertices (Yx, Yy, Yz)
     folded: ca.Function
     groups: dict
-    #: x -> the point of the design that x's boundary data, omega and alignment define,
-    #: re-marched (None where they do not march); None when every x is such a point
+    #: x -> the point of the design that x's boundary data, omega, alignment (and a free
+    #: correspondence's controls) define, re-marched (None where they do not march); None
+    #: when every x is such a point
     project: Callable[[np.ndarray], np.ndarray | None] | None = None
     #: (local, global) symbols with x = vertcat(local, global), where the few global
     #: variables couple with every panel; see :func:`lagrangian_hessian`
@@ -660,13 +660,13 @@ class _MeanTree:
             below, k = node, k + W.size1()
         return ca.vertcat(*out), P[self.size - 1]
 
-    def nodes(self, sides: np.ndarray) -> np.ndarray:
-        """The node values of numeric sides."""
-        out, below = [], ca.DM(sides)
+    def expression(self, sides: ca.MX) -> ca.MX:
+        """The node values (``size``, as P) of the sides."""
+        out, below = [], sides
         for W in self.levels:
             below = ca.mtimes(W, below)
-            out.append(below.full().ravel())
-        return np.concatenate(out)
+            out.append(below)
+        return ca.vertcat(*out)
 
 
 def _fold_multipliers_kv(sigma: np.ndarray):
@@ -822,16 +822,13 @@ def simultaneous(setup: Setup) -> NLP:
     block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
                                            for n in names])
     grid_index = block("U", "V") if corr is not None else np.zeros(0, dtype=np.int64)
-    marched_point = _marched_point(lay, start.sigma, tree)
-
-    def point(pattern, omega: float, rigid: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """x of the marched pattern, with the controls ``uv`` of a free correspondence."""
-        out = marched_point(pattern, omega, rigid)
-        out[grid_index] = uv
-        return out
-
-    x0 = point(start, setup.omega, setup.rigid0(),
-               np.zeros(0) if corr is None else setup.controls0())
+    project = _Projection(x, v, lay, start.sigma, tree, grid_index)
+    x0 = project(lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
+                           "omega": setup.omega, "rigid": setup.rigid0()}))
+    if x0 is None:
+        raise RuntimeError("the start does not march with the CasADi graph")
+    if corr is not None:
+        x0[grid_index] = setup.controls0()
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     if corr is not None:
         lbx[grid_index], ubx[grid_index] = corr.bounds()
@@ -852,19 +849,6 @@ def simultaneous(setup: Setup) -> NLP:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
     folded = ca.Function("folded", [x], Y)
-
-    def project(xk: np.ndarray) -> np.ndarray | None:
-        """The point of the design xk's boundary data define: the NLP's iterates meet the
-        marching equations only near the optimum, but their boundary data, re-marched, are
-        designs in their own right (the constraints still decide whether admissible ones)."""
-        vec, om = (np.asarray(v).ravel() for v in unpack(xk))
-        try:
-            pattern = numpy_model.march(BoundaryData.from_vector(vec, bd0.sigma, N, M))
-        except (InputError, MarchingError):
-            return None
-        if not np.array_equal(pattern.sigma, start.sigma):  # the NLP holds every sigma_d
-            return None
-        return point(pattern, float(om[0]), xk[lay.slices["rigid"]], xk[grid_index])
 
     lengths = np.zeros(lay.size, dtype=bool)
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
@@ -1153,31 +1137,50 @@ class _ConstraintStencils:
             [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]))
 
 
-def _marched_point(lay: _Layout, sigma: np.ndarray, tree: _MeanTree):
-    """(pattern, omega, rigid) -> the simultaneous NLP's x of that marched pattern: its
-    angles and sides, edge directions, panel rotations, folded state, lifted fold
-    multiplier angles and partial means. ``sigma`` is the vertex signs the NLP was built
-    with."""
-    N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
-    a_sym, b_sym = ca.MX.sym("a", N + 1, M + 1), ca.MX.sym("b", N + 1, M + 1)
-    theta = ca.Function("theta", [a_sym, b_sym], [edge_directions(a_sym, b_sym)])
-    kh0, sp = _fold_multipliers_kv(sigma)
+class _Projection:
+    """The simultaneous NLP's :attr:`NLP.project`: x -> the point of x's boundary data,
+    omega, alignment and controls, marched and folded, through one buffered CasADi Function
+    of x (:func:`marching.marched_function` and the mean tree: the solver's trial points
+    are marched without the NumPy model's Python loop over anti-diagonals, and its answer
+    is re-marched with that model in the end); the lifted fold multiplier angles and the
+    crease quaternions' signs in NumPy.
 
-    def point(pattern, omega: float, rigid: np.ndarray) -> np.ndarray:
-        args = [pattern.alpha, pattern.beta, sigma, pattern.lh, pattern.lv, omega]
-        quat = evaluate(panel_quaternions_function(N, M), args)
-        Y = evaluate(fold_function(N, M), args)
-        phi = np.arctan((-kh0 / vx.mu2(pattern.alpha, pattern.beta, sigma)[0, :]
-                         * sp)[1:N, :M])
-        signs = _crease_quaternion_signs(pattern.alpha, pattern.beta, sigma, phi)
-        quat = [q * signs for q in quat]
-        return lay.pack({"A": pattern.alpha, "B": pattern.beta, "LH": pattern.lh,
-                         "LV": pattern.lv, "TH": theta(pattern.alpha, pattern.beta).full(),
-                         "Qw": quat[0], "Qx": quat[1], "Qy": quat[2], "Qz": quat[3],
-                         "Yx": Y[0], "Yy": Y[1], "Yz": Y[2],
-                         "omega": omega, "PHI": phi,
-                         "P": tree.nodes(np.concatenate([pattern.lh.ravel("F"),
-                                                         pattern.lv.ravel("F")])),
-                         "rigid": rigid})
+    None where the march fails a check (:func:`marching.locate_failure`) or gives other
+    vertex signs than ``sigma``, the NLP's. The boundary data are not validated as
+    :class:`BoundaryData` does: the NLP's bounds and rows are stricter (angles within
+    [min_angle, pi - min_angle], sides positive, the boundary MV rows with a margin), and
+    every caller judges the point by them."""
 
-    return point
+    def __init__(self, x: ca.MX, v: dict, lay: _Layout, sigma: np.ndarray, tree: _MeanTree,
+                 grid_index: np.ndarray):
+        N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+        S = ca.DM(sigma)
+        A, B, LH, LV = v["A"], v["B"], v["LH"], v["LV"]
+        out = marched_function(N, M)(ca.vertcat(A[:, 0].T, B[:, 0].T, S[:, 0].T),
+                                     ca.vertcat(A[0, 1:], B[0, 1:], S[0, 1:]),
+                                     LV[:, 0].T, LH[0, :], v["omega"])
+        lh, lv = out[3], out[4]
+        nodes = tree.expression(ca.vertcat(ca.vec(lh), ca.vec(lv)))
+        self._marched = Evaluation(ca.Function("project", [x], [*out, nodes]),
+                                    [np.zeros(lay.size)])
+        self._lay, self._sigma, self._keep = lay, sigma, np.concatenate(
+            [np.arange(lay.size)[lay.slices[n]] for n in ("omega", "rigid")] + [grid_index])
+        self._kh0, self._sp = _fold_multipliers_kv(sigma)
+
+    def __call__(self, xk: np.ndarray) -> np.ndarray | None:
+        self._marched.set(0, xk)
+        (alpha, beta, sigma, lh, lv, mu, alpha_d, theta,
+         qw, qx, qy, qz, yx, yy, yz, nodes) = self._marched.run()
+        if (locate_failure(alpha_d, mu, lh, lv) is not None
+                or not np.array_equal(sigma, self._sigma)):
+            return None
+        N, M = mu.shape
+        phi = np.arctan((-self._kh0 / vx.mu2(alpha, beta, self._sigma)[0, :]
+                         * self._sp)[1:N, :M])
+        signs = _crease_quaternion_signs(alpha, beta, self._sigma, phi)
+        out = self._lay.pack({"A": alpha, "B": beta, "LH": lh, "LV": lv, "TH": theta,
+                              "Qw": qw * signs, "Qx": qx * signs, "Qy": qy * signs,
+                              "Qz": qz * signs, "Yx": yx, "Yy": yy, "Yz": yz, "PHI": phi,
+                              "P": nodes})
+        out[self._keep] = xk[self._keep]
+        return out

@@ -335,6 +335,30 @@ def test_miura_boundary_rejects_bad_parameters():
         rq.miura_boundary(0, 2)
 
 
+@pytest.mark.parametrize("N, M, seed", [(1, 1, 0), (3, 5, 1), (6, 4, 2)])
+def test_marched_function_is_the_march_then_the_fold(N, M, seed):
+    """One Function for the march and the kinematics: the same values as pattern_function,
+    fold_function and panel_quaternions_function, and the NumPy model's to round-off."""
+    bd = small_perturbed(N, M, seed=seed, amplitude=0.03 * np.pi)
+    omega = 1.3
+    out = mg.evaluate(mg.marched_function(N, M), [*mg.boundary_inputs(bd), omega])
+    pattern = mg.evaluate(mg.pattern_function(N, M), mg.boundary_inputs(bd))[:7]
+    args = [*pattern[:5], omega]
+    quat = mg.evaluate(mg.panel_quaternions_function(N, M), args)
+    folded = mg.evaluate(mg.fold_function(N, M), args)
+    for got, want in zip(out[:7] + out[8:], pattern + quat + folded):
+        np.testing.assert_array_equal(got, want)
+    reference = numpy_model.march(bd)
+    for got, want in zip(out[:5], (reference.alpha, reference.beta, reference.sigma,
+                                   reference.lh, reference.lv)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.stack(out[12:15], axis=-1),
+                               numpy_model.fold(reference, omega), rtol=0, atol=1e-12)
+    a, b = ca.MX.sym("a", N + 1, M + 1), ca.MX.sym("b", N + 1, M + 1)
+    theta = ca.Function("theta", [a, b], [mg.edge_directions(a, b)])
+    np.testing.assert_array_equal(out[7], theta(out[0], out[1]).full())
+
+
 # --------------------------------------------------------------- derivatives
 def test_gradients_match_central_differences():
     N, M = 4, 5
