@@ -32,6 +32,7 @@ from rich.markup import escape
 from rich.table import Table
 from typer.core import TyperCommand
 
+from . import memory
 from .boundary import LAYOUTS, miura_boundary, perturb_angles
 from .errors import InputError, RffqmError, one_line
 from .export import EXPORTERS
@@ -630,6 +631,19 @@ def targets() -> None:
 
 
 # --------------------------------------------------------------------------- march
+#: Bytes ``rffqm march`` holds at its peak per panel (the march, the fold and their JSON)
+#: and per panel and state of ``--frames``, on top of :data:`rffqm_nlp.memory.BASE`: an
+#: upper bound of the peaks measured from 200 to 1200 panels a side (docs/solvers.md,
+#: "Memory estimate")
+MARCH_MEMORY_PER_PANEL, MARCH_MEMORY_PER_FRAME = 2000.0, 300.0
+
+
+def march_memory(rows: int, cols: int, frames: int) -> float:
+    """Bytes ``rffqm march`` needs for rows x cols panels and ``frames`` states."""
+    return memory.BASE + (MARCH_MEMORY_PER_PANEL + MARCH_MEMORY_PER_FRAME * frames) * (
+        float(rows) * cols)
+
+
 @app.command()
 def march(
     out: Path = typer.Option(Path("runs/march"), help="Output folder."),
@@ -653,6 +667,10 @@ def march(
 
     with user_errors():
         check_out_dir(out, force)
+        memory.refuse_beyond(march_memory(rows, cols, frames),
+                             f"rffqm march on {rows} x {cols} panels"
+                             + (f" with {frames} frames" if frames else ""),
+                             "choose fewer panels" + (" or frames" if frames else ""))
         bd = miura_boundary(rows, cols, a=a, b=b, alpha0=alpha0, layout=layout)
         if perturb > 0:
             bd = perturb_angles(bd, perturb, seed)

@@ -736,11 +736,9 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 # ---------------------------------------------------------------------- memory
 #: The memory model of :func:`memory_estimate` (bytes), fitted to the peaks measured on the
 #: sphere cap, quarter vase and hyperboloid up to 300 x 300 panels (docs/solvers.md): what
-#: every solve holds (Python, CasADi, the NLP) ...
-MEMORY_BASE = 150e6
-#: ... plus this per panel for each path ("sequential", "simultaneous": IPOPT's
-#: transcriptions with MUMPS' factor; "levenberg-marquardt": the NLP, its Jacobians from
-#: stencils and their blocks by level) ...
+#: every run holds (:data:`rffqm_nlp.memory.BASE`) plus this per panel for each path
+#: ("sequential", "simultaneous": IPOPT's transcriptions with MUMPS' factor;
+#: "levenberg-marquardt": the NLP, its Jacobians from stencils and their blocks by level) ...
 MEMORY_PER_PANEL = {"levenberg-marquardt": 22e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
@@ -760,14 +758,14 @@ DESIGN_MATRICES = 10
 
 def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None) -> int:
     """Bytes that solving ``problem`` with ``options`` needs at its peak (a model fitted to
-    measurements, see :data:`MEMORY_BASE`; a multistart solves one start at a time).
+    measurements, see :data:`MEMORY_PER_PANEL`; a multistart solves one start at a time).
 
-    For P x Q panels: Levenberg-Marquardt needs MEMORY_BASE + MEMORY_PER_PANEL * P Q + 8 *
+    For P x Q panels: Levenberg-Marquardt needs memory.BASE + MEMORY_PER_PANEL * P Q + 8 *
     WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
     n_d = 3 (P + Q) design variables, and with a free correspondence
     (:class:`rffqm_nlp.transcription.Correspondence`) MEMORY_FREE_PER_PANEL * P Q more and
     its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2) in n_d; IPOPT needs
-    MEMORY_BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
+    memory.BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
     the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
@@ -779,10 +777,10 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
             design += 2.0 * min(k, P / 2 + 1) * min(k, Q / 2 + 1)
             per_panel += MEMORY_FREE_PER_PANEL
         working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * design
-        need = (MEMORY_BASE + per_panel * P * Q + working_set
+        need = (memory.BASE + per_panel * P * Q + working_set
                 + 8.0 * DESIGN_MATRICES * design ** 2)
     else:
-        need = MEMORY_BASE + MEMORY_PER_PANEL[options.transcription] * P * Q
+        need = memory.BASE + MEMORY_PER_PANEL[options.transcription] * P * Q
         if options.transcription == "sequential":
             need += MEMORY_SEQUENTIAL_BUILD
     return int(min(need, 2.0 ** 62))

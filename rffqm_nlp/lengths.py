@@ -114,18 +114,16 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
 
 # --------------------------------------------------------------------------- memory
 #: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
-#: each program holds at its peak, on top of :data:`MEMORY_BASE`; fitted to the peaks in
-#: docs/solvers.md ("Memory estimate"), the NLP's rounded up (its bytes per unit still grew
-#: at the largest size measured)
+#: each program holds at its peak, on top of :data:`rffqm_nlp.memory.BASE`; fitted to the
+#: peaks in docs/solvers.md ("Memory estimate"), the NLP's rounded up (its bytes per unit
+#: still grew at the largest size measured)
 MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
-#: what every run holds besides (Python, CasADi, SciPy)
-MEMORY_BASE = 150e6
 
 
 def memory_estimate(N: int, M: int, program: str) -> float:
     """Bytes that :func:`side_length_lp` (``program`` "lp") or :func:`side_length_nlp`
-    ("nlp") needs for N x M panels: MEMORY_BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
-    return MEMORY_BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
+    ("nlp") needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
+    return memory.BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
 
 
 def check_memory(bd: BoundaryData, program: str) -> None:

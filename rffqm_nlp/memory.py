@@ -1,7 +1,7 @@
 """What this machine can hold: the memory still available to this process, and the one-line
 refusal, before any work, of a computation whose estimate exceeds it (the design solve,
 :func:`rffqm_nlp.design.check_memory`; the side-length programs,
-:func:`rffqm_nlp.lengths.check_memory`)."""
+:func:`rffqm_nlp.lengths.check_memory`; ``rffqm march``)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,10 @@ import os
 from pathlib import Path
 
 from .errors import InputError
+
+#: bytes every run holds besides its own data (Python, NumPy, SciPy, CasADi and the package):
+#: the base of each memory model
+BASE = 150e6
 
 
 def available() -> int | None:

@@ -19,7 +19,7 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import design, files, lengths, memory, sweeps
+from rffqm_nlp import cli, design, files, lengths, memory, sweeps
 from rffqm_nlp.cli import app
 from rffqm_nlp.errors import InputError
 
@@ -329,11 +329,40 @@ def test_the_march_command_refuses_an_lp_it_cannot_hold(tmp_path, monkeypatch):
         raise AssertionError("the length maps were built")
     monkeypatch.setattr(lengths, "length_maps", maps)
     out = tmp_path / "march"
-    res = runner.invoke(app, ["march", "--rows", "3000", "--cols", "3000", "--lp",
+    # 800 x 800: the march itself fits any machine with 1.5 GB (cli.march_memory)
+    res = runner.invoke(app, ["march", "--rows", "800", "--cols", "800", "--lp",
                               "--out", str(out)])
-    assert_one_line(res, ["side_length_lp on 3000 x 3000 panels needs about",
+    assert_one_line(res, ["side_length_lp on 800 x 800 panels needs about",
                           "GB available; choose fewer panels"])
     assert not out.exists()
+
+
+@pytest.mark.parametrize("frames, fragments", [
+    (0, ["rffqm march on 100000 x 100000 panels needs about 2.0e4 GB;",
+         "GB available; choose fewer panels"]),
+    (50, ["rffqm march on 100000 x 100000 panels with 50 frames needs about 1.7e5 GB;",
+          "GB available; choose fewer panels or frames"])])
+def test_the_march_command_refuses_a_pattern_it_cannot_hold(tmp_path, monkeypatch, frames,
+                                                            fragments):
+    """`rffqm march` on a pattern (and motion) this machine cannot hold: exit status 2, one
+    line with the estimate, no output folder, before any march."""
+    def boundary(*args, **kwargs):
+        raise AssertionError("the boundary was built")
+    monkeypatch.setattr(cli, "miura_boundary", boundary)
+    out = tmp_path / "march"
+    res = runner.invoke(app, ["march", "--rows", "100000", "--cols", "100000", "--frames",
+                              str(frames), "--out", str(out)])
+    assert_one_line(res, fragments)
+    assert not out.exists()
+
+
+def test_the_march_memory_model_bounds_the_measured_peaks():
+    """cli.march_memory against the peaks of `rffqm march` (2026-12-02, docs/solvers.md):
+    0.37, 1.00 and 2.92 GB at 400, 800 and 1200 panels a side, 0.46 GB at 200 with 20
+    frames and 0.79 GB at 400 with 10: at least each, at most 1.5 times it."""
+    for n, frames, peak in ((400, 0, 0.37), (800, 0, 1.00), (1200, 0, 2.92), (200, 20, 0.46),
+                            (400, 10, 0.79)):
+        assert 1 <= cli.march_memory(n, n, frames) / 1e9 / peak <= 1.5, (n, frames)
 
 
 def test_the_side_length_memory_model_matches_the_measured_peaks():
