@@ -367,7 +367,7 @@ def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
         raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")
     om = check_omega(omega)
     ev = Evaluation(fold_function(pat.N, pat.M),
-                     [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
+                    [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
     states = []
     for w in np.atleast_1d(om):
         ev.set(5, w)

@@ -1162,7 +1162,7 @@ class _Projection:
         lh, lv = out[3], out[4]
         nodes = tree.expression(ca.vertcat(ca.vec(lh), ca.vec(lv)))
         self._marched = Evaluation(ca.Function("project", [x], [*out, nodes]),
-                                    [np.zeros(lay.size)])
+                                   [np.zeros(lay.size)])
         self._lay, self._sigma, self._keep = lay, sigma, np.concatenate(
             [np.arange(lay.size)[lay.slices[n]] for n in ("omega", "rigid")] + [grid_index])
         self._kh0, self._sp = _fold_multipliers_kv(sigma)
