@@ -8,17 +8,19 @@ those linear maps. Two ways to choose ell over the same feasible set
 * :func:`side_length_lp`, the paper's linear program eq:linearP (SciPy's HiGHS): minimise
   sum(ell) subject to every computed side >= eps, then shift ell by delta. Its objective
   is arbitrary and drives some sides to nearly zero.
-* :func:`side_length_nlp` (CasADi + IPOPT), the nonlinear objective the paper leaves to
+* :func:`side_length_nlp` (HiGHS, and CasADi + IPOPT), the objective the paper leaves to
   future work ("keep the aspect ratios of the panels as uniform as possible, while
   optimizing over the same feasible set"). With s = A ell (K,) all K = (N+1)M + N(M+1)
   sides, the scale fixed by mean(s) = 1 and s >= min_length:
 
-  - ``"max_min"``: maximise t subject to s >= t, an LP solved with IPOPT so both
-    objectives share one code path and one error model. Its optimum t* decides
-    feasibility: no pattern with every side >= min_length (times the mean) exists iff
-    t* < min_length, and no valid pattern at all iff t* <= 0.
-  - ``"uniform"``: minimise var(log s). It is scale-invariant and 0 exactly when all sides
-    are equal (a Miura-ori with a = b is recovered exactly); it penalises a side going to
+  - ``"max_min"``: maximise t subject to s >= t, an LP solved with HiGHS (as
+    :func:`side_length_lp`; IPOPT, which solved it before, stopped with Restoration_Failed
+    on larger perturbed patterns that HiGHS solves: docs/solvers.md, "Side lengths: the
+    max-min LP with HiGHS"). Its optimum t* decides feasibility: no pattern with every
+    side >= min_length (times the mean) exists iff t* < min_length, and no valid pattern
+    at all iff t* <= 0.
+  - ``"uniform"``: minimise var(log s) (IPOPT). It is scale-invariant and 0 exactly when
+    all sides are equal (a Miura-ori with a = b is recovered exactly); it penalises a side going to
     zero without bound (a barrier against the LP's near-degenerate panels) and long sides
     symmetrically; it controls the spread of sizes across the pattern, which a per-panel
     aspect ratio does not; and equal sides give per-panel aspect ratios near 1 wherever the
@@ -28,7 +30,7 @@ those linear maps. Two ways to choose ell over the same feasible set
     max-min solution.
 
 :func:`side_length_nlp` returns a :class:`SideLengthSolution` (the boundary data and
-what IPOPT reported); :func:`length_spread` summarises a pattern's sides. Both refuse,
+what the last solver reported); :func:`length_spread` summarises a pattern's sides. Both refuse,
 before any work, a pattern whose program needs more memory than the machine has
 (:func:`check_memory`): their constraint matrices are dense in ell, so they grow like
 N M (N + M).
@@ -114,22 +116,22 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
 
 # --------------------------------------------------------------------------- memory
 #: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
-#: each program holds at its peak, on top of :data:`rffqm_nlp.memory.BASE`; fitted to the
-#: peaks in docs/solvers.md ("Memory estimate"), the NLP's rounded up (its bytes per unit
-#: still grew at the largest size measured)
+#: each program holds at its peak, on top of :data:`rffqm_nlp.memory.BASE`: "lp" HiGHS'
+#: LPs (:func:`side_length_lp` and the max-min of :func:`side_length_nlp`), "nlp" IPOPT's
+#: "uniform" NLP; fitted to the peaks in docs/solvers.md ("Memory estimate")
 MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
 
 
 def memory_estimate(N: int, M: int, program: str) -> float:
-    """Bytes that :func:`side_length_lp` (``program`` "lp") or :func:`side_length_nlp`
-    ("nlp") needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
+    """Bytes that a side-length ``program`` ("lp": HiGHS' LPs, "nlp": IPOPT's "uniform"
+    NLP) needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
     return memory.BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
 
 
-def check_memory(bd: BoundaryData, program: str) -> None:
+def check_memory(bd: BoundaryData, program: str, name: str) -> None:
     """Refuse, before any work, side lengths of ``bd``'s pattern that this machine cannot
-    hold (:func:`memory_estimate`): one :class:`InputError` line."""
-    name = {"lp": "side_length_lp", "nlp": "side_length_nlp"}[program]
+    hold with ``program`` (:func:`memory_estimate`): one :class:`InputError` line naming
+    the function ``name``."""
     memory.refuse_beyond(memory_estimate(bd.N, bd.M, program),
                          f"{name} on {bd.N} x {bd.M} panels",
                          "choose fewer panels or keep the given side lengths")
@@ -148,7 +150,7 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
     """
     if not (np.isfinite(eps) and eps > 0):
         raise InputError(f"eps must be a finite positive length, got {eps!r}")
-    check_memory(bd, "lp")
+    check_memory(bd, "lp", "side_length_lp")
     A = length_maps(bd).interior
     n = A.shape[1]
     res = linprog(np.ones(n), A_ub=-A, b_ub=-eps * np.ones(A.shape[0]), bounds=(0, None),
@@ -177,7 +179,8 @@ class SideLengthSolution:
 
     ``sides`` (K,) are all edge lengths (rows of :attr:`LengthMaps.all_sides`), mean 1;
     ``min_over_mean`` is the smallest of them; ``objective`` the optimal objective value
-    (t* for "max_min", var(log s) for "uniform"); ``stats`` IPOPT's status and counts.
+    (t* for "max_min", var(log s) for "uniform"); ``stats`` the last solver's status,
+    success, iterations and objective (HiGHS' for "max_min", IPOPT's for "uniform").
     """
 
     boundary: BoundaryData
@@ -195,9 +198,11 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
 
     ``objective`` is one of :data:`OBJECTIVES` (see the module docstring). ``min_length``
     (default :data:`DEFAULT_MIN_LENGTH`) is the lower bound on every side as a fraction of
-    the mean side, in (0, 1). Raises :class:`InfeasibleDesign` when no lengths give every
-    side >= min_length * mean (in particular when no valid pattern exists for these
-    angles), :class:`SolverFailed` with IPOPT's status when IPOPT does not succeed,
+    the mean side, in (0, 1). ``tol``, ``max_iter`` and ``verbose`` are IPOPT's, for
+    "uniform" (the max-min LP runs to HiGHS' own tolerances). Raises
+    :class:`InfeasibleDesign` when no lengths give every side >= min_length * mean (in
+    particular when no valid pattern exists for these angles), :class:`SolverFailed` with
+    the solver's status when HiGHS or IPOPT does not succeed,
     :class:`MarchingError` when the angles themselves fail the marching checks and
     :class:`InputError` on invalid arguments or a program this machine cannot hold
     (:func:`check_memory`).
@@ -209,18 +214,18 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
                              _MIN_LENGTH, "min_length")
     tol = check_value(tol, Key("number", low=0, low_open=True), "tol")
     max_iter = check_value(max_iter, Key("whole", low=1), "max_iter")
-    check_memory(bd, "nlp")
+    check_memory(bd, "lp" if objective == "max_min" else "nlp", "side_length_nlp")
     A = length_maps(bd).all_sides
     mean_row = A.mean(axis=0)
     if not np.any(np.abs(mean_row) > 0):
         raise InfeasibleDesign("the mean side length is identically zero for these angles")
-    opts = _ipopt_options(tol, int(max_iter), verbose)
-    ell, t_star, stats = _max_min(A, mean_row, opts)
+    ell, t_star, stats = _max_min(A, mean_row)
     _check_feasible(t_star, min_length)
     value = t_star
     if objective == "uniform":
         s0 = np.maximum(A @ ell, min_length)
-        ell, value, stats = _uniform(A, mean_row, min_length, ell, s0, opts)
+        ell, value, stats = _uniform(A, mean_row, min_length, ell, s0,
+                                     _ipopt_options(tol, int(max_iter), verbose))
     floor = (min_length if objective == "uniform" else t_star) * (1 - 1e-6)
     return _solution(bd, A, ell, float(value), floor, stats)
 
@@ -282,18 +287,22 @@ def _solve(name: str, x, f, g, opts: dict, x0, lbx, ubx, lbg,
     return xs, float(sol["f"]), stats
 
 
-def _max_min(A: np.ndarray, mean_row: np.ndarray, opts: dict):
-    """max t s.t. A ell >= t, mean_row . ell = 1 (variables ell, t, both free)."""
+def _max_min(A: np.ndarray, mean_row: np.ndarray) -> tuple[np.ndarray, float, dict]:
+    """max t s.t. A ell >= t, mean_row . ell = 1 (variables ell, t, both free), an LP solved
+    with HiGHS: (ell*, t*, stats). Always feasible and bounded (t <= mean(A ell) = 1), so
+    any other outcome is a :class:`SolverFailed` with HiGHS' message."""
     K, n = A.shape
-    x = ca.MX.sym("x", n + 1)
-    ell, t = x[:n], x[n]
-    g = ca.vertcat(ca.mtimes(ca.DM(A), ell) - t, ca.dot(ca.DM(mean_row), ell))
-    # Start: equal boundary lengths scaled to mean side 1 (any point is fine for an LP).
-    ell0 = np.ones(n) / mean_row.sum() if mean_row.sum() > 0 else np.ones(n)
-    x0 = np.append(ell0, (A @ ell0).min())
-    xs, f, stats = _solve("max_min", x, -t, g, opts, x0, -np.inf, np.inf,
-                          np.append(np.zeros(K), 1.0), np.append(np.full(K, np.inf), 1.0))
-    return xs[:n], -f, stats
+    cost = np.zeros(n + 1)
+    cost[n] = -1.0
+    res = linprog(cost, A_ub=np.hstack([-A, np.ones((K, 1))]), b_ub=np.zeros(K),
+                  A_eq=np.append(mean_row, 0.0)[None, :], b_eq=[1.0], bounds=(None, None),
+                  method="highs")
+    stats = {"status": res.message, "success": bool(res.success), "iterations": int(res.nit),
+             "objective": float(-res.fun) if res.success else float("nan")}
+    if not res.success:
+        raise SolverFailed(f"HiGHS did not solve the max_min side-length LP: {res.message}",
+                           status=str(res.status))
+    return np.asarray(res.x[:n]), float(-res.fun), stats
 
 
 def _uniform(A: np.ndarray, mean_row: np.ndarray, min_length: float, ell0: np.ndarray,

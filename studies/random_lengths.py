@@ -5,7 +5,8 @@ U(-0.05 pi, 0.05 pi) (``rq.perturb_angles``), the mountain-valley signs kept. Fo
 marched angles the side lengths come from
 
 * ``LP``       the paper's linear program eq:linearP (``side_length_lp``, eps = 1e-2);
-* ``max_min``  IPOPT: maximise the smallest side at mean side 1 (``side_length_nlp``);
+* ``max_min``  an LP (HiGHS): maximise the smallest side at mean side 1
+  (``side_length_nlp``; IPOPT solved it before 2026-12-02);
 * ``uniform``  IPOPT: minimise the variance of log side lengths (``side_length_nlp``);
 * ``uniform>=t*/2``  the same with every side >= half the max-min optimum t* (``min_length``),
   a compromise between the two (table only).

@@ -304,19 +304,22 @@ def test_the_panels_override_of_the_command_is_checked_too(tmp_path, no_work):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("program", ["lp", "nlp"])
-def test_side_lengths_this_machine_cannot_hold_are_refused_before_any_work(program,
-                                                                            monkeypatch):
+@pytest.mark.parametrize("function, objective, program", [
+    ("side_length_lp", None, "lp"), ("side_length_nlp", "max_min", "lp"),
+    ("side_length_nlp", "uniform", "nlp")])
+def test_side_lengths_this_machine_cannot_hold_are_refused_before_any_work(
+        function, objective, program, monkeypatch):
     """The side-length programs' dense maps grow like N M (N + M): a 3000 x 3000 pattern
     (over 10,000 GB) is refused in one line before the maps are built."""
     def maps(bd):
         raise AssertionError("the length maps were built")
     monkeypatch.setattr(lengths, "length_maps", maps)
     bd = rq.miura_boundary(3000, 3000, a=1.0, b=1.3, alpha0=1.1)
-    solve = lengths.side_length_lp if program == "lp" else lengths.side_length_nlp
     with pytest.raises(InputError) as info:
-        solve(bd)
+        getattr(lengths, function)(bd, **({} if objective is None else
+                                          {"objective": objective}))
     line = str(info.value)
+    assert line.startswith(f"{function} on 3000 x 3000")
     need = lengths.memory_estimate(3000, 3000, program)
     assert "\n" not in line and f"on 3000 x 3000 panels needs about {memory.gigabytes(need)} GB" \
         in line and line.endswith("choose fewer panels or keep the given side lengths")
@@ -366,12 +369,16 @@ def test_the_march_memory_model_bounds_the_measured_peaks():
 
 
 def test_the_side_length_memory_model_matches_the_measured_peaks():
-    """lengths.MEMORY_PER_UNIT: HiGHS' LP peaked at 0.55 and 3.5 GB at 100 and 200 panels a
-    side, IPOPT's max-min NLP at 1.09 GB at 70 (2026-12-02)."""
+    """lengths.MEMORY_PER_UNIT (2026-12-02, docs/solvers.md): HiGHS' LP of eq:linearP
+    peaked at 0.55 and 3.5 GB at 100 and 200 panels a side, its max-min LP at 0.58 and 1.71
+    GB at 100 and 150, IPOPT's "uniform" NLP at 0.45 and 1.17 GB at 50 and 70."""
     gb = lambda n, program: lengths.memory_estimate(n, n, program) / 1e9  # noqa: E731
     assert gb(100, "lp") == pytest.approx(0.55, rel=0.15)
     assert gb(200, "lp") == pytest.approx(3.5, rel=0.15)
-    assert gb(70, "nlp") == pytest.approx(1.09, rel=0.15)
+    assert gb(100, "lp") == pytest.approx(0.58, rel=0.15)
+    assert gb(150, "lp") == pytest.approx(1.71, rel=0.15)
+    assert gb(50, "nlp") == pytest.approx(0.45, rel=0.2)
+    assert gb(70, "nlp") == pytest.approx(1.17, rel=0.15)
 
 
 def test_memory_model_matches_the_measured_peaks():

@@ -162,6 +162,26 @@ def test_uniform_on_miura_gives_equal_sides(layout, a, b):
         np.testing.assert_allclose(march(bd).side_lengths, pat.side_lengths, atol=1e-8)
 
 
+def test_max_min_where_ipopt_failed_is_certified_by_the_dual_lp():
+    """100 x 100 perturbed Miura angles, where the max-min LP solved with IPOPT stopped with
+    Restoration_Failed (2026-12-02; docs/solvers.md, "Side lengths"): the marched pattern's
+    smallest side over its mean is t*, and the dual LP, min lam s.t. A' y = lam mean_row,
+    sum(y) = 1, y >= 0, attains it (strong duality: no larger t exists)."""
+    bd = rq.perturb_angles(rq.miura_boundary(100, 100), 0.02, seed=0)
+    sol = side_length_nlp(bd, "max_min", min_length=1e-6)
+    sides = march(sol.boundary).side_lengths
+    assert sol.objective > 0.4
+    assert sides.min() / sides.mean() == pytest.approx(sol.objective, abs=1e-9)
+    A = length_maps(bd).all_sides
+    K, n = A.shape
+    dual = linprog(np.append(np.zeros(K), 1.0),
+                   A_eq=np.vstack([np.hstack([A.T, -A.mean(axis=0)[:, None]]),
+                                   np.append(np.ones(K), 0.0)]),
+                   b_eq=np.append(np.zeros(n), 1.0), bounds=[(0, None)] * K + [(None, None)],
+                   method="highs")
+    assert dual.status == 0 and dual.fun == pytest.approx(sol.objective, abs=1e-7)
+
+
 def test_max_min_on_miura_is_one():
     sol = side_length_nlp(rq.miura_boundary(5, 7, a=1.0, b=3.0), "max_min")
     assert sol.objective == pytest.approx(1.0, abs=1e-8)
