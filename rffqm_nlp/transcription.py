@@ -1145,8 +1145,9 @@ class _Projection:
     is re-marched with that model in the end); the lifted fold multiplier angles and the
     crease quaternions' signs in NumPy.
 
-    None where the march fails a check (:func:`marching.locate_failure`) or gives other
-    vertex signs than ``sigma``, the NLP's. The boundary data are not validated as
+    None where the march fails a check (:func:`marching.locate_failure`), gives other
+    vertex signs than ``sigma``, the NLP's, or the point is not finite (a NaN or inf in
+    x's omega, alignment or controls). The boundary data are not validated as
     :class:`BoundaryData` does: the NLP's bounds and rows are stricter (angles within
     [min_angle, pi - min_angle], sides positive, the boundary MV rows with a margin), and
     every caller judges the point by them."""
@@ -1183,4 +1184,4 @@ class _Projection:
                               "Qz": qz * signs, "Yx": yx, "Yy": yy, "Yz": yz, "PHI": phi,
                               "P": nodes})
         out[self._keep] = xk[self._keep]
-        return out
+        return out if np.all(np.isfinite(out)) else None

@@ -275,6 +275,12 @@ def test_projection_remarches_the_boundary_data_of_any_iterate():
         failed += not marches
         assert (nlp.project(xk) is not None) == marches
     assert 0 < failed < 40  # both kinds met
+    # a NaN or inf in a boundary angle, omega or the alignment (last in x): no point
+    for where in (nlp.groups["angles"][0], nlp.groups["omega"], x.size - 1):
+        for bad in (np.nan, np.inf):
+            xk = x.copy()
+            xk[where] = bad
+            assert nlp.project(xk) is None
 
 
 def test_unreachable_min_length_reports_infeasibility():
