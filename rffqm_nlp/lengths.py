@@ -20,18 +20,18 @@ those linear maps. Two ways to choose ell over the same feasible set
     side >= min_length (times the mean) exists iff t* < min_length, and no valid pattern
     at all iff t* <= 0.
   - ``"uniform"``: minimise var(log s) (IPOPT). It is scale-invariant and 0 exactly when
-    all sides are equal (a Miura-ori with a = b is recovered exactly); it penalises a side going to
-    zero without bound (a barrier against the LP's near-degenerate panels) and long sides
-    symmetrically; it controls the spread of sizes across the pattern, which a per-panel
-    aspect ratio does not; and equal sides give per-panel aspect ratios near 1 wherever the
-    angles allow it, without defining the aspect ratio of a general quadrilateral. The sides
-    are variables s >= min_length with s = A ell, so IPOPT never takes the log of a
-    non-positive number. Not convex in s: IPOPT returns a local minimiser, started at the
-    max-min solution.
+    all sides are equal (a Miura-ori with a = b is recovered exactly); it penalises a side
+    going to zero without bound (a barrier against the LP's near-degenerate panels) and
+    long sides symmetrically; it controls the spread of sizes across the pattern, which a
+    per-panel aspect ratio does not; and equal sides give per-panel aspect ratios near 1
+    wherever the angles allow it, without defining the aspect ratio of a general
+    quadrilateral. The sides are variables s >= min_length with s = A ell, so IPOPT never
+    takes the log of a non-positive number. Not convex in s: IPOPT returns a local
+    minimiser, started at the max-min solution.
 
 :func:`side_length_nlp` returns a :class:`SideLengthSolution` (the boundary data and
-what the last solver reported); :func:`length_spread` summarises a pattern's sides. Both refuse,
-before any work, a pattern whose program needs more memory than the machine has
+what the last solver reported); :func:`length_spread` summarises a pattern's sides. Both
+refuse, before any work, a pattern whose program needs more memory than the machine has
 (:func:`check_memory`): their constraint matrices are dense in ell, so they grow like
 N M (N + M).
 """
@@ -297,12 +297,13 @@ def _max_min(A: np.ndarray, mean_row: np.ndarray) -> tuple[np.ndarray, float, di
     res = linprog(cost, A_ub=np.hstack([-A, np.ones((K, 1))]), b_ub=np.zeros(K),
                   A_eq=np.append(mean_row, 0.0)[None, :], b_eq=[1.0], bounds=(None, None),
                   method="highs")
-    stats = {"status": res.message, "success": bool(res.success), "iterations": int(res.nit),
-             "objective": float(-res.fun) if res.success else float("nan")}
     if not res.success:
         raise SolverFailed(f"HiGHS did not solve the max_min side-length LP: {res.message}",
                            status=str(res.status))
-    return np.asarray(res.x[:n]), float(-res.fun), stats
+    t_star = float(-res.fun)
+    stats = {"status": res.message, "success": True, "iterations": int(res.nit),
+             "objective": t_star}
+    return np.asarray(res.x[:n]), t_star, stats
 
 
 def _uniform(A: np.ndarray, mean_row: np.ndarray, min_length: float, ell0: np.ndarray,
