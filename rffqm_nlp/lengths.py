@@ -254,7 +254,7 @@ def _solution(bd: BoundaryData, A: np.ndarray, ell: np.ndarray, value: float, fl
     try:
         boundary = bd.with_lengths(ell)
     except InputError as exc:
-        raise SolverFailed(f"IPOPT's lengths are not admissible boundary lengths: {exc}",
+        raise SolverFailed(f"the solver's lengths are not admissible boundary lengths: {exc}",
                            status="invalid_lengths", last_iterate=ell) from exc
     if sides.min() < floor:
         raise SolverFailed(
