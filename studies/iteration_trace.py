@@ -140,7 +140,9 @@ def main() -> None:
     final = result.stats.objective
     lines = [f"# The default solve step by step: {args.target}, {args.n} x {args.n} panels", "",
              f"- {run.header()}", f"- status {result.stats.status}, final loss {final:.10g}, "
-             f"fit RMS / diameter {result.fit.rms:.4f}",
+             f"fit RMS / diameter {result.fit.rms:.4f}; {result.stats.marched_iterations} of "
+             f"{result.stats.iterations} iterations by Levenberg-Marquardt (the trace covers "
+             "those; the rest, if any, IPOPT's after a stall)",
              *summary(trace, final, args.first, args.last), "",
              *table(trace, final)]
     write_table(args.out / f"iteration_trace_{args.target}_{args.n}.md", "\n".join(lines) + "\n")
