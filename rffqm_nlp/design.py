@@ -735,11 +735,12 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 
 # ---------------------------------------------------------------------- memory
 #: The memory model of :func:`memory_estimate` (bytes), fitted to the peaks measured on the
-#: sphere cap, quarter vase and hyperboloid up to 300 x 300 panels (docs/solvers.md): what
-#: every run holds (:data:`rffqm_nlp.memory.BASE`) plus this per panel for each path
-#: ("sequential", "simultaneous": IPOPT's transcriptions with MUMPS' factor;
-#: "levenberg-marquardt": the NLP, its Jacobians from stencils and their blocks by level) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 22e3, "simultaneous": 190e3, "sequential": 250e3}
+#: sphere cap, quarter vase and hyperboloid up to 500 x 500 panels, from above where a fit
+#: would fall short (docs/solvers.md, "Memory estimate"): what every run holds
+#: (:data:`rffqm_nlp.memory.BASE`) plus this per panel for each path ("sequential",
+#: "simultaneous": IPOPT's transcriptions with MUMPS' factor; "levenberg-marquardt": the
+#: NLP, its Jacobians from stencils and their blocks by level) ...
+MEMORY_PER_PANEL = {"levenberg-marquardt": 25e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... for Levenberg-Marquardt with a free correspondence this per panel more (the

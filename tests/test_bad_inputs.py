@@ -399,6 +399,9 @@ def test_memory_model_matches_the_measured_peaks():
     assert gb(200) == pytest.approx(1.57, rel=0.15)
     assert gb(300) == pytest.approx(3.52, rel=0.15)
     assert gb(500) == pytest.approx(10.76, rel=0.15)
+    # a refusal should err high: the model is at least each Levenberg-Marquardt peak (to 1%)
+    for n, peak in ((100, 0.49), (200, 1.57), (300, 3.52), (500, 10.76)):
+        assert gb(n) >= 0.99 * peak
     assert gb(100, solver="ipopt") == pytest.approx(2.1, rel=0.15)
     assert gb(200, solver="ipopt") == pytest.approx(7.2, rel=0.15)
     assert gb(20, solver="ipopt", transcription="sequential") < 2
