@@ -475,24 +475,27 @@ class Setup:
         return np.concatenate([quaternion_from_rotation(self.rotation), self.translation])
 
 
-def _objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None,
-                         target=None) -> ca.MX:
-    """Loss of the coarse lattice r (:func:`loss_residuals`), quaternion normalisation, the
-    Tikhonov term towards the Miura start and the smoothness of the boundary perturbation
-    (lengths in units of the lattice spacing). ``grid``: the controls (Cu, Cv) of a free
-    correspondence (the target lattice at their grid, and their Tikhonov term), or None;
-    ``target``: that target lattice (Tx, Ty, Tz) as symbols of its own (default: computed
-    from ``grid``)."""
-    q, t = rigid[:4], rigid[4:]
+def _objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.MX:
+    """Loss of the coarse lattice r (:func:`loss_residuals`), then the rows on the design
+    alone (:func:`_design_residuals`). ``grid``: the controls (Cu, Cv) of a free
+    correspondence (the target lattice at their grid, and their Tikhonov term), or None."""
+    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+    return ca.vertcat(loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
+                                     setup.weights, setup.spacing),
+                      _design_residuals(setup, rigid, boundary_vec, grid))
+
+
+def _design_residuals(setup: Setup, rigid, boundary_vec, grid=None):
+    """The residuals after the loss, functions of the design alone (MX or SX): the
+    quaternion normalisation, the Tikhonov term towards the Miura start, a free
+    correspondence's Tikhonov term (``grid``: its controls (Cu, Cv), or None) and the
+    smoothness of the boundary perturbation (lengths in units of the lattice spacing)."""
+    q = rigid[:4]
     ref = setup.reference_vector
     nl = setup.reference.N + setup.reference.M
     scale = np.concatenate([np.ones(ref.size - nl - 1), np.full(nl, 1 / setup.spacing), [1.0]])
     delta = (boundary_vec - ref) * scale
-    if target is None:
-        target = setup.target if grid is None else setup.correspondence.lattice(*grid)
-    out = [loss_residuals(r, rotation_from_quaternion(q), t, target, setup.weights,
-                          setup.spacing),
-           ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
+    out = [ca.sumsqr(q) - 1,  # fixes the quaternion's free scale
            np.sqrt(setup.weights.get("regularization", 0) / scale.size) * delta]
     if grid is not None:
         out.append(setup.correspondence.residuals(
@@ -878,39 +881,135 @@ def _constraint_jacobian(setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _M
 
 def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int
                        ) -> stencils.LocalJacobian | stencils.LiftedJacobian:
-    """The Jacobian of :func:`simultaneous`'s residuals (n_r rows): one instance of
-    :func:`_objective_residuals` on the variables it reads (the coarse lattice's folded
-    vertices, the alignment, the boundary data vector and a free correspondence's
-    controls), a far smaller graph than the NLP's."""
-    N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
-    i, j = _grid(N // 2 + 1, M // 2 + 1)
-    lattice = [ca.MX.sym(n, *i.shape) for n in ("Yx", "Yy", "Yz")]
-    columns = [_index(lay, n, 2 * i, 2 * j).ravel("F") for n in ("Yx", "Yy", "Yz")]
-    rigid = ca.MX.sym("rigid", 7)
-    columns.append(np.arange(lay.slices["rigid"].start, lay.slices["rigid"].stop))
-    boundary = _boundary_columns(lay)
-    bvec = ca.MX.sym("boundary", boundary.size)
-    inputs, grid, target = [*lattice, rigid, bvec], None, None
-    columns.append(boundary)
-    corr, n_t = setup.correspondence, 0
-    if corr is not None:
-        # the target lattice read as variables of its own, lifted from the controls after
-        # (stencils.LiftedJacobian): the residuals' Jacobian stays local
-        grid = tuple(ca.MX.sym(n, *corr.shape) for n in ("U", "V"))
-        target = [ca.MX.sym(n, *i.shape) for n in ("Tx", "Ty", "Tz")]
-        controls = np.concatenate([np.arange(lay.slices[n].start, lay.slices[n].stop)
-                                   for n in ("U", "V")])
-        n_t = 3 * i.size
-        inputs += [*grid, *target]
-        columns += [controls, lay.size + np.arange(n_t)]
-    expr = _objective_residuals(setup, lattice, rigid, bvec, grid, target)
-    inner = stencils.LocalJacobian([stencils.single("residuals", inputs, expr,
-                                                    np.concatenate(columns), np.arange(n_r))],
-                                   [], (n_r, lay.size + n_t))
+    """The Jacobian of :func:`simultaneous`'s residuals (n_r rows, in its order), assembled
+    from stencils (:class:`_ResidualStencils`); with a free correspondence the target
+    lattice is read as variables of its own and lifted from the controls after
+    (:class:`stencils.LiftedJacobian`), so the residuals' Jacobian stays local."""
+    inner = _ResidualStencils(setup, lay).jacobian(n_r)
+    corr = setup.correspondence
     if corr is None:
         return inner
+    controls = np.concatenate([np.arange(lay.slices[n].start, lay.slices[n].stop)
+                               for n in ("U", "V")])
     return stencils.LiftedJacobian(inner, lambda x: corr.target_values(x[controls]), controls,
                                    lay.size)
+
+
+class _ResidualStencils:
+    """The rows of :func:`_objective_residuals` as stencils: the position term at every
+    lattice point (its 3 rows), the fundamental forms at every interior lattice point (its
+    row in each of the 6 blocks), and the rows on the design alone
+    (:func:`_design_residuals`) one instance on the alignment, the boundary vector and a
+    free correspondence's controls. With a free correspondence the columns go on past x
+    into the target lattice (Tx, Ty, Tz, each column-major over the lattice)."""
+
+    FOLDED = ("Yx", "Yy", "Yz")
+
+    def __init__(self, setup: Setup, lay: _Layout):
+        self.setup, self.lay = setup, lay
+        N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
+        self.n1, self.m1 = N // 2 + 1, M // 2 + 1
+        self.free = setup.correspondence is not None
+        self.stencils: list[stencils.Stencil] = []
+        self._next = 0
+
+    def jacobian(self, n_r: int) -> stencils.LocalJacobian:
+        weights = self.setup.weights
+        if weights.get("forms", 0) > 0:
+            self._forms(weights["forms"])
+        if weights.get("position", 0) > 0:
+            self._position(weights["position"])
+        self._design(n_r)
+        n_t = 3 * self.n1 * self.m1 if self.free else 0
+        return stencils.LocalJacobian(self.stencils, [], (n_r, self.lay.size + n_t))
+
+    def _points(self, i: np.ndarray, j: np.ndarray) -> list[np.ndarray]:
+        """The columns of the folded lattice points (i, j) (x, y, z), then with a free
+        correspondence those of the target lattice points (x, y, z)."""
+        mine = [_index(self.lay, n, 2 * i, 2 * j) for n in self.FOLDED]
+        if not self.free:
+            return mine
+        n = self.n1 * self.m1
+        return mine + [self.lay.size + c * n + i + self.n1 * j for c in range(3)]
+
+    def _rows(self, count: int, shape: tuple[int, int]) -> list[np.ndarray]:
+        """The next ``count`` blocks of rows of one (column-major) shape."""
+        size = shape[0] * shape[1]
+        rows = [self._next + k * size + np.arange(size).reshape(shape, order="F")
+                for k in range(count)]
+        self._next += count * size
+        return rows
+
+    def _add(self, name: str, z: list[ca.SX], p: list[ca.SX], expr: ca.SX,
+             columns: list[np.ndarray], rows: list[np.ndarray], params: list[np.ndarray]
+             ) -> None:
+        f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
+                        [expr])
+        self.stencils.append(stencils.repeated(f, columns, rows, params))
+
+    def _forms(self, weight: float) -> None:
+        """(eq:optInverse) at the interior lattice point (a, b): its 3 x 3 neighbourhood's
+        forms (:func:`shape.fundamental_forms`) minus the target's, as in
+        :func:`loss_residuals`; the target's are constants without a free correspondence."""
+        ni, mi = self.n1 - 2, self.m1 - 2
+        a, b = (k + 1 for k in _grid(ni, mi))
+        offsets = [(di, dj) for dj in (-1, 0, 1) for di in (-1, 0, 1)]  # column-major 3 x 3
+        around = [self._points(a + di, b + dj) for di, dj in offsets]
+        blocks = [ca.SX.sym(f"r{c}", 3, 3) for c in range(6 if self.free else 3)]
+        z = [ca.vec(m) for m in blocks]
+        columns = [around[k][c] for c in range(len(blocks)) for k in range(9)]
+        mine = shape.fundamental_forms(blocks[:3])
+        if self.free:
+            theirs, p, params = shape.fundamental_forms(blocks[3:]), [], []
+        else:
+            p = [ca.SX.sym(f"form{k}") for k in range(6)]
+            theirs, params = p, list(shape.fundamental_forms(self.setup.target))
+        res = ca.vertcat(*(m - t for m, t in zip(mine, theirs))) / self.setup.spacing ** 2
+        self._add("forms", z, p, np.sqrt(weight / (6 * ni * mi)) * res, columns,
+                  self._rows(6, (ni, mi)), params)
+
+    def _position(self, weight: float) -> None:
+        """R r + t minus the target at every lattice point, as in :func:`loss_residuals`
+        (rows 3 p + c, p the point's column-major index); the target a constant without a
+        free correspondence."""
+        i, j = _grid(self.n1, self.m1)
+        rigid = _symbols("rigid", 7)
+        y = _symbols("y", 3)
+        points = self._points(i, j)
+        rigid_columns = [np.full(i.shape, self.lay.slices["rigid"].start + k) for k in range(7)]
+        if self.free:
+            target, p, params = _symbols("t", 3), [], []
+            z, columns = y + rigid + target, points[:3] + rigid_columns + points[3:]
+        else:
+            target = p = _symbols("t", 3)
+            z, columns = y + rigid, points + rigid_columns
+            params = [self.setup.target[..., c] for c in range(3)]
+        moved = ca.mtimes(rotation_from_quaternion(rigid[:4]), ca.vertcat(*y))
+        res = (moved + ca.vertcat(*rigid[4:]) - ca.vertcat(*target)) / self.setup.spacing
+        n = self.n1 * self.m1
+        rows = self._next + np.arange(3 * n).reshape((3, n), order="F")
+        self._next += 3 * n
+        self._add("position", z, p, np.sqrt(weight / n) * res, columns,
+                  [r.reshape((self.n1, self.m1), order="F") for r in rows], params)
+
+    def _design(self, n_r: int) -> None:
+        """The rows after the loss: one instance of :func:`_design_residuals`."""
+        lay, corr = self.lay, self.setup.correspondence
+        rigid = ca.SX.sym("rigid", 7)
+        boundary = _boundary_columns(lay)
+        bvec = ca.SX.sym("boundary", boundary.size)
+        inputs = [rigid, bvec]
+        columns = [np.arange(lay.slices["rigid"].start, lay.slices["rigid"].stop), boundary]
+        grid = None
+        if corr is not None:
+            grid = tuple(ca.SX.sym(n, *corr.shape) for n in ("U", "V"))
+            inputs += list(grid)
+            columns += [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]
+        expr = _design_residuals(self.setup, rigid, bvec, grid)
+        self.stencils.append(stencils.single("design_residuals", inputs, expr,
+                                             np.concatenate(columns),
+                                             np.arange(self._next, n_r)))
+        self._next = n_r
 
 
 def _boundary_columns(lay: _Layout) -> np.ndarray:

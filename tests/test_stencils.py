@@ -126,6 +126,11 @@ CASES = [("sphere_cap", 4, {}), ("hyperboloid", 6, {}), ("quarter_vase", 8, {}),
          ("hyperboloid", 6, {"weights": {"position": 1.0, "forms": 0.5, "regularization": 0.2,
                                          "smoothness": 0.3}}),
          ("hyperboloid", 4, {"correspondence": "lattice"}),
+         ("sphere_cap", 4, {"correspondence": "lattice",
+                            "weights": {"position": 1.0, "forms": 0.0, "regularization": 0.0,
+                                        "smoothness": 0.2}}),
+         ("quarter_vase", 4, {"weights": {"position": 0.0, "forms": 1.0,
+                                          "regularization": 0.1}}),
          ("quarter_vase", 6, {"correspondence": "free"})]
 
 
