@@ -39,7 +39,8 @@ Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least square
 problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D_d plus
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
-lattice point). B estimates the part of the Hessian that Gauss-Newton drops, sum r_i
+lattice point); where lam is below :data:`METRIC_DAMPING` the last point's M serves (lam M
+is then a small part of the model, and the pattern moves little a step). B estimates the part of the Hessian that Gauss-Newton drops, sum r_i
 Hess r_i (and the active inequalities' curvature), by the structured secant update of
 Dennis, Gay & Welsch ("An adaptive nonlinear least-squares algorithm", ACM TOMS 7, 1981;
 NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each accepted
@@ -82,6 +83,9 @@ BLOCK = 1 << 24
 GRAM_ROWS = 1024
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
+#: damping below which a linearisation keeps the last metric M instead of computing it
+#: (docs/solvers.md: the same iterations, within one or two, on the bundled targets)
+METRIC_DAMPING = 1e-3
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
@@ -139,7 +143,7 @@ class _Linearization:
     levels: "_Levels"
     JtJ: np.ndarray
     grad: np.ndarray
-    pattern_metric: np.ndarray
+    pattern_metric: np.ndarray | None
     lift: Lift | None
 
     def jacobian_times(self, X: np.ndarray) -> np.ndarray:
@@ -334,43 +338,55 @@ class _Window:
         free_column = np.full(n_d, -1, dtype=np.int64)
         free_column[self.free] = np.arange(self.free.size)
         width = n_m + self.pool
-        lifted = np.full(J.shape[0], -1, dtype=np.int64)  # -> row of the Lift (-1: none)
-        lifted[lifted_rows] = np.arange(lifted_rows.size)
         self._slot = slot
         self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
                         for lo, hi in levels.bounds]
         order = np.argsort(at, kind="stable")
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
-        # level -> (rows, their pool and free parts and their nonzeros' index in J, the
-        # lifted ones among the rows and their rows in the Lift)
-        self._residuals = {}
+        # level -> (its residual rows, their part in the pool's columns, k x width, whose
+        # data is a view of one array refilled once a pass from J's nonzeros at _index)
+        self._residuals, index, start = {}, [], 0
+        self._data = np.zeros(int((column[J.indices] >= 0).sum()))
         for k, lo, hi in zip(range(-1, len(levels.bounds)), bounds[:-1], bounds[1:]):
             if hi > lo:
                 rows = order[lo:hi]
-                where = np.flatnonzero(lifted[rows] >= 0)
-                self._residuals[k] = (rows, *self._split(J[rows], column, free_column, width),
-                                      where, lifted[rows[where]])
+                block, block_index = self._pooled(J[rows], column, width, start)
+                self._residuals[k] = (rows, block)
+                index.append(block_index)
+                start += block_index.size
+        self._index = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
+        # J's direct part in the free columns (n_r x n_f), data = J's nonzeros at _free_index
+        own = column[Jcoo.col] < 0
+        rows, cols = Jcoo.row[own], free_column[Jcoo.col[own]]
+        self._free = sp.csr_matrix((np.zeros(rows.size), (rows, cols)),
+                                   shape=(J.shape[0], self.free.size))
+        self._free.sort_indices()
+        self._free_index = (Jcoo.data[own].astype(np.int64) - 1)[np.lexsort((cols, rows))]
+        self._lifted_rows = lifted_rows
         is_pattern = np.zeros(n_s, dtype=bool)
         is_pattern[pattern] = True
         root = np.zeros(n_s)
         root[pattern] = np.sqrt(weights)
-        self._pattern = [(np.flatnonzero(is_pattern[lo:hi]), root[lo:hi][is_pattern[lo:hi]])
-                         for lo, hi in levels.bounds]
+        counts = [int(is_pattern[lo:hi].sum()) for lo, hi in levels.bounds]
+        if any(not is_pattern[lo:lo + k].all() for (lo, _), k in zip(levels.bounds, counts)):
+            raise RuntimeError("the metric's rows of a level do not come first")
+        # per level: its first rows are the metric's, weighted by these roots (k, 1)
+        self._pattern = [(k, root[lo:lo + k, None]) for (lo, _), k in zip(levels.bounds, counts)]
 
-    def _split(self, block: sp.csr_matrix, column: np.ndarray, free_column: np.ndarray,
-               width: int) -> tuple:
-        """Residual rows (k, n_d + n_s) as (their part in the pool's columns, k x width;
-        its nonzeros' index in J; their free design columns, k x n_f; its index)."""
+    def _pooled(self, block: sp.csr_matrix, column: np.ndarray, width: int, start: int
+                ) -> tuple[sp.csr_matrix, np.ndarray]:
+        """Residual rows (k, n_d + n_s) in the pool's columns (k x width), their data the
+        view of ``_data`` from ``start``, and the index in J of each of its nonzeros."""
         coo = block.tocoo()
-        index = block.data.astype(np.int64) - 1
-        pooled = column[coo.col] >= 0
-        parts = []
-        for keep, cols, n in ((pooled, column, width), (~pooled, free_column, self.free.size)):
-            part = sp.csr_matrix((np.zeros(keep.sum()), (coo.row[keep], cols[coo.col[keep]])),
-                                 shape=(block.shape[0], n))
-            order = np.lexsort((cols[coo.col[keep]], coo.row[keep]))  # CSR's order
-            parts += [part, index[keep][order]]
-        return tuple(parts)
+        keep = column[coo.col] >= 0
+        rows, cols = coo.row[keep], column[coo.col[keep]]
+        order = np.lexsort((cols, rows))  # CSR's order
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=block.shape[0]))])
+        stop = start + rows.size
+        part = sp.csr_matrix((self._data[start:stop], cols[order], indptr),
+                             shape=(block.shape[0], width))
+        part.data = self._data[start:stop]  # a view (the constructor may have copied)
+        return part, (coo.data[keep].astype(np.int64) - 1)[order]
 
     @staticmethod
     def _slots(bounds: list[tuple[int, int]], last: np.ndarray) -> np.ndarray:
@@ -390,95 +406,108 @@ class _Window:
             free, size = free[take:], size + fresh.size
         return slot
 
-    def __call__(self, J: np.ndarray, r: np.ndarray,
-                 lift: Lift | None) -> tuple[np.ndarray, ...] | None:
+    def __call__(self, J: np.ndarray, r: np.ndarray, lift: Lift | None,
+                 metric: bool = True) -> tuple | None:
         """(J' J, J' r, S_p' D_p S_p), in the design's order, at the residuals' Jacobian
         nonzeros J (its direct part), its ``lift`` (columns in the order of ``free``) and
         the residuals r (n_r,), with the levels refilled at the same point; None where they
-        are not finite."""
-        n_m, n_f = self.marching.size, self.free.size
+        are not finite. ``metric``: False skips the metric (None in its place)."""
+        n_m = self.marching.size
         pool = np.zeros((n_m + self.pool, n_m))  # [I; the working set of S]
         pool[:n_m] = np.eye(n_m)
-        sums = _Sums(n_m, n_f)
-        lifted = None if lift is None else lift.product()  # (lifted rows, n_f)
-        self._reduce(-1, pool, J, r, lifted, sums)
+        self._data[:] = J[self._index]
+        self._free.data[:] = J[self._free_index]
+        Jf = self._free.toarray()  # the free columns of J (n_r, n_f): S is zero in them
+        if lift is not None:
+            Jf[self._lifted_rows] += lift.product()
+        sums = _Sums(n_m, Jf, r)
+        self._reduce(-1, pool, sums)
         for k, ((lo, hi), W, (mine, root)) in enumerate(zip(self.levels.bounds, self._blocks,
                                                             self._pattern)):
             S = W @ pool
             pool[n_m + self._slot[lo:hi]] = S
-            sums.metric.add(S[mine] * root[:, None])
-            self._reduce(k, pool, J, r, lifted, sums)
-        out = sums.total(self.marching, self.free)
-        return out if all(np.all(np.isfinite(a)) for a in out) else None
+            if metric and mine:
+                sums.metric.add(S[:mine], root)
+            self._reduce(k, pool, sums)
+        out = sums.total(self.marching, self.free, metric)
+        return out if all(a is None or np.all(np.isfinite(a)) for a in out) else None
 
-    def _reduce(self, k: int, pool: np.ndarray, J: np.ndarray, r: np.ndarray,
-                lifted: np.ndarray | None, sums: "_Sums") -> None:
-        """The residual rows reduced at level k added to the sums (in place); ``lifted``:
-        F_u H in the lifted rows (None without a lift)."""
+    def _reduce(self, k: int, pool: np.ndarray, sums: "_Sums") -> None:
+        """The residual rows reduced at level k added to the sums (in place)."""
         if k in self._residuals:
-            rows, pooled, index, free, free_index, where, which = self._residuals[k]
-            pooled.data[:] = J[index]
-            if free.nnz:
-                free.data[:] = J[free_index]
-                Jf = free.toarray()
-            else:
-                Jf = np.zeros(free.shape)
-            if lifted is not None and where.size:
-                Jf[where] += lifted[which]
-            sums.add(pooled @ pool, Jf, r[rows])
+            rows, pooled = self._residuals[k]
+            sums.add(pooled @ pool, rows)
 
 
 class _Sums:
-    """The sums of one pass over the levels: over the marching columns (n_m) and the free
-    ones (n_f) the Gram matrices of the reduced Jacobian's rows, their cross products
-    J_f' J_m and J' r, and over the marching columns the metric's Gram matrix."""
+    """The sums of one pass over the levels: over the marching columns (n_m) the Gram
+    matrices of the reduced Jacobian's rows and of the metric's, J_m' r, and the cross
+    products J_f' J_m with the free columns (``Jf``, (n_r, n_f): J's free columns, in
+    which S is zero, so their Gram matrix and J_f' r come at once from ``r`` (n_r,))."""
 
-    def __init__(self, n_m: int, n_f: int):
-        self.jacobian, self.metric, self.free = _Gram(n_m), _Gram(n_m), _Gram(n_f)
-        self.cross = np.zeros((n_f, n_m))  # Jf' Jm
-        self.grad, self.free_grad = np.zeros(n_m), np.zeros(n_f)
+    def __init__(self, n_m: int, Jf: np.ndarray, r: np.ndarray):
+        self.Jf, self.r = Jf, r
+        self.cross = np.zeros((Jf.shape[1], n_m))  # Jf' Jm
+        self.grad = np.zeros(n_m)
+        self.jacobian, self.metric = _Gram(n_m, self._block), _Gram(n_m)
 
-    def add(self, Jm: np.ndarray, Jf: np.ndarray, r: np.ndarray) -> None:
-        """Residual rows: their reduced Jacobian in the marching columns Jm (k, n_m) and in
-        the free ones Jf (k, n_f), their values r (k,)."""
-        self.jacobian.add(Jm)
-        self.grad += Jm.T @ r
-        if Jf.shape[1]:
-            self.free.add(Jf)
-            self.cross += Jf.T @ Jm
-            self.free_grad += Jf.T @ r
+    def add(self, Jm: np.ndarray, rows: np.ndarray) -> None:
+        """Residual rows ``rows`` (k,): their reduced Jacobian in the marching columns Jm
+        (k, n_m)."""
+        self.jacobian.add(Jm, tags=rows)
 
-    def total(self, marching: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f)."""
+    def _block(self, Jm: np.ndarray, rows: np.ndarray) -> None:
+        self.grad += Jm.T @ self.r[rows]
+        if self.Jf.shape[1]:
+            self.cross += self.Jf[rows].T @ Jm
+
+    def total(self, marching: np.ndarray, free: np.ndarray, metric: bool = True) -> tuple:
+        """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f); the last
+        None without ``metric``."""
         n = marching.size + free.size
         JtJ, grad, M = np.zeros((n, n)), np.zeros(n), np.zeros((n, n))
         JtJ[np.ix_(marching, marching)] = self.jacobian.total()
         JtJ[np.ix_(free, marching)] = self.cross
         JtJ[np.ix_(marching, free)] = self.cross.T
-        JtJ[np.ix_(free, free)] = self.free.total()
-        grad[marching], grad[free] = self.grad, self.free_grad
+        JtJ[np.ix_(free, free)] = self.Jf.T @ self.Jf
+        grad[marching], grad[free] = self.grad, self.Jf.T @ self.r
+        if not metric:
+            return JtJ, grad, None
         M[np.ix_(marching, marching)] = self.metric.total()
         return JtJ, grad, M
 
 
 class _Gram:
     """A' A (n x n) of rows A added a block at a time: gathered into a buffer of
-    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle."""
+    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle.
+    ``then(block, tags)``, if given, also sees each block and the tags its rows came with."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int,
+                 then: Callable[[np.ndarray, np.ndarray], None] | None = None):
         self._upper = np.zeros((n, n), order="F")
         self._buffer = np.empty((GRAM_ROWS, n))
+        self._tags = np.zeros(GRAM_ROWS, dtype=np.int64)
         self._used = 0
+        self._then = then
 
-    def add(self, rows: np.ndarray) -> None:
-        """Add rows (k, n)."""
-        if self._used + rows.shape[0] > GRAM_ROWS:
+    def add(self, rows: np.ndarray, scale: np.ndarray | None = None,
+            tags: np.ndarray | None = None) -> None:
+        """Add rows (k, n), each times its ``scale`` (k, 1) if given, with ``tags`` (k,)
+        for ``then``."""
+        k = rows.shape[0]
+        if self._used + k > GRAM_ROWS:
             self._flush()
-        if rows.shape[0] > GRAM_ROWS:
-            self._syrk(rows)
+        if k > GRAM_ROWS:
+            self._syrk(rows if scale is None else rows * scale, tags)
             return
-        self._buffer[self._used:self._used + rows.shape[0]] = rows
-        self._used += rows.shape[0]
+        out = self._buffer[self._used:self._used + k]
+        if scale is None:
+            out[:] = rows
+        else:
+            np.multiply(rows, scale, out=out)
+        if tags is not None:
+            self._tags[self._used:self._used + k] = tags
+        self._used += k
 
     def total(self) -> np.ndarray:
         """The symmetric sum (n, n)."""
@@ -488,12 +517,14 @@ class _Gram:
 
     def _flush(self) -> None:
         if self._used:
-            self._syrk(self._buffer[:self._used])
+            self._syrk(self._buffer[:self._used], self._tags[:self._used])
             self._used = 0
 
-    def _syrk(self, rows: np.ndarray) -> None:
+    def _syrk(self, rows: np.ndarray, tags: np.ndarray | None) -> None:
         self._upper = la.blas.dsyrk(1.0, rows.T, beta=1.0, c=self._upper, trans=0, lower=0,
                                     overwrite_c=1)
+        if self._then is not None:
+            self._then(rows, tags)
 
 
 class Manifold:
@@ -524,11 +555,11 @@ class Manifold:
         self._values = _Buffered(ca.Function("values", [nlp.x], [nlp.residuals, nlp.g]))
         self._jacobian_r, self._jacobian_g = nlp.r_jacobian, nlp.g_jacobian
         G = self._jacobian_g.pattern().tocsr()  # data = 1 + the index of each nonzero
-        self._order_by_level(G)
-        where = np.full(n, -1)
-        where[self.state] = np.arange(self.state.size)
         pattern = np.zeros(n, dtype=bool)
         pattern[nlp.pattern_index] = True
+        self._order_by_level(G, pattern)
+        where = np.full(n, -1)
+        where[self.state] = np.arange(self.state.size)
         self.pattern = where[np.flatnonzero(pattern & ~design & ~fixed)]
         weights = nlp.damping_weights
         self.design_weights = weights[self.design]
@@ -540,11 +571,13 @@ class Manifold:
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
         self._slice_jacobians(G)
 
-    def _order_by_level(self, G: sp.csr_matrix) -> None:
+    def _order_by_level(self, G: sp.csr_matrix, pattern: np.ndarray) -> None:
         """The matching of marching equations to state unknowns (``match``), their levels
         (:meth:`_levels`), and the state reordered by level: the unknowns of each level
-        contiguous, in the order of its equations. ``G``: the constraints' Jacobian pattern
-        (n_g x n_x, data = 1 + the index of each nonzero)."""
+        contiguous, in the order of its equations, those of the crease pattern (``pattern``,
+        (n_x,) bool) first (the metric's rows of a level are then a slice, :class:`_Window`).
+        ``G``: the constraints' Jacobian pattern (n_g x n_x, data = 1 + the index of each
+        nonzero)."""
         Cs = G[self.eq][:, self.state].tocsr()
         match = maximum_bipartite_matching(Cs, perm_type="column")
         if np.any(match < 0):
@@ -554,7 +587,9 @@ class Manifold:
         own = Cs.col == match[Cs.row]
         off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
         level = self._levels(off)
-        self.levels = [np.flatnonzero(level == k) for k in range(level.max() + 1)]
+        later = ~pattern[self.state[match]]  # per equation: its unknown is not the pattern's
+        self.levels = [e[np.argsort(later[e], kind="stable")]
+                       for e in (np.flatnonzero(level == k) for k in range(level.max() + 1))]
         order = match[np.concatenate(self.levels)]  # old state index of each new position
         self.state = self.state[order]
         position = np.empty_like(order)
@@ -633,9 +668,10 @@ class Manifold:
             return None
         return _Point(x=x, r=r, g=g)
 
-    def linearize(self, p: _Point) -> _Linearization | None:
+    def linearize(self, p: _Point, metric: bool = True) -> _Linearization | None:
         """The derivatives at p; None where they are not finite or the marching equations
-        no longer determine their unknowns. Invalidates the last point's."""
+        no longer determine their unknowns. Invalidates the last point's. ``metric``: False
+        skips the damping metric's part S_p' D_p S_p (``pattern_metric`` None)."""
         (J, lift), G = self._residual_jacobian(p.x), self._jacobian_g(p.x)
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(G))):
             return None
@@ -644,7 +680,7 @@ class Manifold:
             return None
         if not self._sweeps.refill(G):
             return None
-        reduced = self._window(J, p.r, lift)
+        reduced = self._window(J, p.r, lift, metric)
         if reduced is None:
             return None
         return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
@@ -692,8 +728,14 @@ class _Model:
     known: dict[int, np.ndarray] = field(default_factory=dict)
 
 
-def _model(man: Manifold, p: _Point, lin: _Linearization) -> _Model:
-    M = lin.pattern_metric + np.diag(man.design_weights)
+def _model(man: Manifold, p: _Point, lin: _Linearization,
+           M: np.ndarray | None = None) -> _Model:
+    """The model at p; its metric from ``lin``, or ``M`` (n_d, n_d) where ``lin`` has
+    none (linearised without it)."""
+    if lin.pattern_metric is not None:
+        M = lin.pattern_metric + np.diag(man.design_weights)
+    if M is None:
+        raise ValueError("a linearisation without the metric needs the metric to keep")
     now = man.inequalities(p.g, p.x)
     return _Model(JtJ=lin.JtJ, H=lin.JtJ, M=M, grad=lin.grad, lin=lin,
                   lower=man.lower - now, upper=man.upper - now)
@@ -856,15 +898,16 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
     B = np.zeros((man.design.size, man.design.size))
-    augmented, scale, error, last = False, None, None, None
+    augmented, scale, error, last, m_last = False, None, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
         lin = m = None  # the last point's derivatives go before the next are built
-        lin = man.linearize(p)
+        lin = man.linearize(p, metric=m_last is None or lam >= METRIC_DAMPING)
         if lin is None:
             status = "Stalled"
             break
-        m = _model(man, p, lin)
+        m = _model(man, p, lin, m_last)
+        m_last = m.M
         if last is not None:
             B = _secant(B, last.step, *last.gradient_change(m, steps))
         if augmented and _positive_definite(m.H + B + lam * m.M):

@@ -148,6 +148,13 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     dd = rng.standard_normal(man.design.size)
     close(steps.change(m, dd), A @ dd)
     assert man._window.pool < man.state.size
+    bare = man.linearize(p, metric=False)  # the pass without the metric: the rest the same
+    assert bare.pattern_metric is None
+    close(bare.JtJ, Jr.T @ Jr)
+    close(bare.grad, Jr.T @ p.r)
+    np.testing.assert_array_equal(reduced._model(man, p, bare, m.M).M, m.M)
+    with pytest.raises(ValueError, match="metric"):
+        reduced._model(man, p, bare)
 
 @pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
 def test_levenberg_marquardt_alone_reaches_ipopts_optimum(name):
