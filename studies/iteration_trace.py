@@ -65,9 +65,9 @@ def traced_solve(target: str, n: int) -> tuple[Trace, DesignResult]:
     trace = Trace()
     originals = (reduced.Manifold.linearize, reduced._Steps.__call__, reduced._kkt_error)
 
-    def linearize(self, p):
+    def linearize(self, p, metric=True):
         trace.linearized(p.objective)
-        return originals[0](self, p)
+        return originals[0](self, p, metric)
 
     def steps(self, m, lam, shift):
         out = originals[1](self, m, lam, shift)
