@@ -427,7 +427,7 @@ class _Window:
             S = W @ pool
             pool[n_m + self._slot[lo:hi]] = S
             if metric and mine:
-                sums.metric.add(S[:mine], root)
+                sums.metric.add(S[:mine], scale=root)
             self._reduce(k, pool, sums)
         out = sums.total(self.marching, self.free, metric)
         return out if all(a is None or np.all(np.isfinite(a)) for a in out) else None
@@ -440,73 +440,65 @@ class _Window:
 
 
 class _Sums:
-    """The sums of one pass over the levels: over the marching columns (n_m) the Gram
-    matrices of the reduced Jacobian's rows and of the metric's, J_m' r, and the cross
-    products J_f' J_m with the free columns (``Jf``, (n_r, n_f): J's free columns, in
-    which S is zero, so their Gram matrix and J_f' r come at once from ``r`` (n_r,))."""
+    """The sums of one pass over the levels: the Gram matrix of the residual rows [J_m J_f
+    r] (n_m marching columns, n_f free ones: ``Jf``, (n_r, n_f), J's free columns, in which
+    S is zero; r (n_r,)), which holds J' J and J' r, and the metric's over the marching
+    columns. One syrk each, no products of their own: on this machine a threaded gemm
+    followed by a Cholesky factorisation took ms instead of us (OpenBLAS, two threads)."""
 
     def __init__(self, n_m: int, Jf: np.ndarray, r: np.ndarray):
-        self.Jf, self.r = Jf, r
-        self.cross = np.zeros((Jf.shape[1], n_m))  # Jf' Jm
-        self.grad = np.zeros(n_m)
-        self.jacobian, self.metric = _Gram(n_m, self._block), _Gram(n_m)
+        self.Jf, self.r = Jf, r[:, None]
+        self.n_m, self.n_f = n_m, Jf.shape[1]
+        self.jacobian, self.metric = _Gram(n_m + self.n_f + 1), _Gram(n_m)
 
     def add(self, Jm: np.ndarray, rows: np.ndarray) -> None:
         """Residual rows ``rows`` (k,): their reduced Jacobian in the marching columns Jm
         (k, n_m)."""
-        self.jacobian.add(Jm, tags=rows)
-
-    def _block(self, Jm: np.ndarray, rows: np.ndarray) -> None:
-        self.grad += Jm.T @ self.r[rows]
-        if self.Jf.shape[1]:
-            self.cross += self.Jf[rows].T @ Jm
+        self.jacobian.add(Jm, self.Jf[rows], self.r[rows])
 
     def total(self, marching: np.ndarray, free: np.ndarray, metric: bool = True) -> tuple:
         """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f); the last
         None without ``metric``."""
-        n = marching.size + free.size
-        JtJ, grad, M = np.zeros((n, n)), np.zeros(n), np.zeros((n, n))
-        JtJ[np.ix_(marching, marching)] = self.jacobian.total()
-        JtJ[np.ix_(free, marching)] = self.cross
-        JtJ[np.ix_(marching, free)] = self.cross.T
-        JtJ[np.ix_(free, free)] = self.Jf.T @ self.Jf
-        grad[marching], grad[free] = self.grad, self.Jf.T @ self.r
+        order = np.concatenate([marching, free])
+        gram = self.jacobian.total()
+        n = order.size
+        JtJ, grad = np.zeros((n, n)), np.zeros(n)
+        JtJ[np.ix_(order, order)] = gram[:n, :n]
+        grad[order] = gram[:n, n]
         if not metric:
             return JtJ, grad, None
+        M = np.zeros((n, n))
         M[np.ix_(marching, marching)] = self.metric.total()
         return JtJ, grad, M
 
 
 class _Gram:
     """A' A (n x n) of rows A added a block at a time: gathered into a buffer of
-    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle.
-    ``then(block, tags)``, if given, also sees each block and the tags its rows came with."""
+    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle."""
 
-    def __init__(self, n: int,
-                 then: Callable[[np.ndarray, np.ndarray], None] | None = None):
+    def __init__(self, n: int):
         self._upper = np.zeros((n, n), order="F")
         self._buffer = np.empty((GRAM_ROWS, n))
-        self._tags = np.zeros(GRAM_ROWS, dtype=np.int64)
         self._used = 0
-        self._then = then
 
-    def add(self, rows: np.ndarray, scale: np.ndarray | None = None,
-            tags: np.ndarray | None = None) -> None:
-        """Add rows (k, n), each times its ``scale`` (k, 1) if given, with ``tags`` (k,)
-        for ``then``."""
-        k = rows.shape[0]
+    def add(self, *parts: np.ndarray, scale: np.ndarray | None = None) -> None:
+        """Add rows (k, n), given as blocks of columns side by side (k, n_i), each row times
+        its ``scale`` (k, 1) if given."""
+        k = parts[0].shape[0]
         if self._used + k > GRAM_ROWS:
             self._flush()
         if k > GRAM_ROWS:
-            self._syrk(rows if scale is None else rows * scale, tags)
+            rows = np.hstack(parts)
+            self._syrk(rows if scale is None else rows * scale)
             return
-        out = self._buffer[self._used:self._used + k]
-        if scale is None:
-            out[:] = rows
-        else:
-            np.multiply(rows, scale, out=out)
-        if tags is not None:
-            self._tags[self._used:self._used + k] = tags
+        out, column = self._buffer[self._used:self._used + k], 0
+        for part in parts:
+            into = out[:, column:column + part.shape[1]]
+            if scale is None:
+                into[:] = part
+            else:
+                np.multiply(part, scale, out=into)
+            column += part.shape[1]
         self._used += k
 
     def total(self) -> np.ndarray:
@@ -517,14 +509,12 @@ class _Gram:
 
     def _flush(self) -> None:
         if self._used:
-            self._syrk(self._buffer[:self._used], self._tags[:self._used])
+            self._syrk(self._buffer[:self._used])
             self._used = 0
 
-    def _syrk(self, rows: np.ndarray, tags: np.ndarray | None) -> None:
+    def _syrk(self, rows: np.ndarray) -> None:
         self._upper = la.blas.dsyrk(1.0, rows.T, beta=1.0, c=self._upper, trans=0, lower=0,
                                     overwrite_c=1)
-        if self._then is not None:
-            self._then(rows, tags)
 
 
 class Manifold:
