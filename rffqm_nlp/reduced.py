@@ -21,9 +21,11 @@ only the rows of S that a later level or a residual still needs (a working set t
 relative to the state, as the pattern grows) and reduces them at once into the
 n_d x n_d matrices the step needs: J' J of the reduced Jacobian J = J_d + J_s S (plus, with
 a free correspondence, the controls' F_T H, kept as its factors), the gradient J' r and the
-metric below. The inequality rows G_d + G_s S that a step needs come
-from the sweep backwards through the levels (S' applied to their state parts), and every
-row's change under a step from one forward sweep (S dd).
+metric below; a row of S at vertex (i, j) is nonzero only in the boundary data of the
+vertices (0..i, 0) and (0, 0..j), so its Gram products are taken over those columns
+alone. The inequality rows G_d + G_s S that a step needs come from the sweep backwards
+through the levels (S' applied to their state parts), and every row's change under a step
+from one forward sweep (S dd).
 
 Each iteration solves the damped, linearised problem
 
@@ -40,8 +42,9 @@ problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
 lattice point); where lam is below :data:`METRIC_DAMPING` the last point's M serves (lam M
-is then a small part of the model, and the pattern moves little a step). B estimates the part of the Hessian that Gauss-Newton drops, sum r_i
-Hess r_i (and the active inequalities' curvature), by the structured secant update of
+is then a small part of the model, and the pattern moves little a step). B estimates the
+part of the Hessian that Gauss-Newton drops, sum r_i Hess r_i (and the active
+inequalities' curvature), by the structured secant update of
 Dennis, Gay & Welsch ("An adaptive nonlinear least-squares algorithm", ACM TOMS 7, 1981;
 NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each accepted
 step; a step uses it when it predicted the last step's reduction better than J' J alone
@@ -79,8 +82,14 @@ CORRECTIONS = 3
 MAX_DAMPING = 1e10
 #: entries (rows x state) of a block of rows swept back at once (:meth:`_Steps.rows`)
 BLOCK = 1 << 24
-#: rows gathered before one update of J' J or of the metric (:class:`_Gram`)
+#: rows gathered before one update of J' J or of the metric (:class:`_Gram`), and of one
+#: band's range of columns of them
 GRAM_ROWS = 1024
+BAND_ROWS = 256
+#: the Gram matrices' columns are cut into at most BANDS bands of at least BAND_WIDTH
+#: columns (:func:`_bands`)
+BANDS = 8
+BAND_WIDTH = 128
 #: QPs per step, each over more rows, before the step counts as failed
 QP_ROUNDS = 10
 #: damping below which a linearisation keeps the last metric M instead of computing it
@@ -131,9 +140,10 @@ class _Linearization:
     and state (n_s) columns (J_design, J_state; the inequality rows' G_design, G_state),
     the sweeps through the marching equations there (``levels``: S = ds/dd applied to a
     block, and its transpose), and the reduced problem's J' J, J' r and the metric's
-    S_p' D_p S_p (n_d x n_d, n_d), accumulated level by level (:class:`_Window`) without S.
-    With a lifted residual Jacobian (:class:`rffqm_nlp.stencils.LiftedJacobian`), J_design
-    holds its direct part and ``lift`` the rest, F_u H, its columns numbered in the design.
+    S_p' D_p S_p (n_d x n_d, n_d; the last None when linearised without it), accumulated
+    level by level (:class:`_Window`) without S. With a lifted residual Jacobian
+    (:class:`rffqm_nlp.stencils.LiftedJacobian`), J_design holds its direct part and
+    ``lift`` the rest, F_u H, its columns numbered in the design.
     Valid until the manifold linearises at the next point (``levels`` is refilled there)."""
 
     J_design: sp.csr_matrix
@@ -296,18 +306,26 @@ class _Window:
     columns in the pool (``marching``, n_m of them: the boundary data, omega and the rigid
     alignment, in which S is zero) except the lifted ones (``free``, n_f: a free
     correspondence's controls, which the march does not read), whose reduced Jacobian is
-    J_d's columns plus F_u H (:class:`rffqm_nlp.stencils.Lift`, formed once a pass, lifted
-    rows x n_f, its rows gathered level by level into dense k x n_f).
+    J_d's columns plus F_u H (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
+
+    The pool's columns follow the boundary (``position``: the left edge from its top down
+    to the corner, then the bottom edge; omega, the alignment and any design variable
+    without a position at the corner): the state at vertex (i, j) reads only the boundary
+    data of the vertices (0..i, 0) and (0, 0..j), so every row of S is nonzero only in a
+    range of columns around the corner, about (i + j) / (N + M) of them. The rows are
+    gathered by their range, cut into :func:`_bands` bands (:class:`_Gram`), so the Gram
+    matrices cost about a third of the dense products' arithmetic at large sizes.
 
     Static: built once from the sparsity; ``J`` (n_r x (n_d + n_s), design columns then the
     state in level order) has data = 1 + the index of each nonzero in the residuals'
     Jacobian (its direct part). ``pattern`` (state rows) and ``weights`` are the metric's
     rows and their D; ``free`` (design positions) and ``lifted_rows`` (the residual rows
-    F_u H reaches, in the Lift's order) are empty without a lift.
+    F_u H reaches, in the Lift's order) are empty without a lift; ``position`` (n_d,).
     """
 
     def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
-                 weights: np.ndarray, free: np.ndarray, lifted_rows: np.ndarray):
+                 weights: np.ndarray, free: np.ndarray, lifted_rows: np.ndarray,
+                 position: np.ndarray):
         n_d, n_s = levels.n_d, levels.n_s
         self.levels = levels
         level = np.empty(n_s, dtype=np.int64)
@@ -330,8 +348,10 @@ class _Window:
         if np.isin(free, W.indices[~uses]).any():
             raise RuntimeError("a lifted design variable is read by the marching equations")
         self.free = free
-        self.marching = np.setdiff1d(np.arange(n_d), free)
+        marching = np.setdiff1d(np.arange(n_d), free)
+        self.marching = marching[np.argsort(position[marching], kind="stable")]
         n_m = self.marching.size
+        self.mid = int(np.sum(position[self.marching] < 0))  # the first column at the corner
         column = np.full(n_d + n_s, -1, dtype=np.int64)  # -> pool row (-1: a free column)
         column[self.marching] = np.arange(n_m)
         column[n_d:] = n_m + slot
@@ -341,17 +361,22 @@ class _Window:
         self._slot = slot
         self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
                         for lo, hi in levels.bounds]
-        order = np.argsort(at, kind="stable")
+        span = self._spans(levels, column, n_m)
+        edges = _bands(n_m)
+        # residual rows by level, in the order of their bands: (rows, their part in the
+        # pool's columns, k x width, whose data is a view of one array refilled once a pass
+        # from J's nonzeros at _index, and the segments (a, b, start, stop) of one range)
+        lo_r, hi_r = self._residual_spans(J, column, span, n_d)
+        order = np.lexsort((self._band(lo_r, hi_r, edges), at))
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
-        # level -> (its residual rows, their part in the pool's columns, k x width, whose
-        # data is a view of one array refilled once a pass from J's nonzeros at _index)
         self._residuals, index, start = {}, [], 0
         self._data = np.zeros(int((column[J.indices] >= 0).sum()))
         for k, lo, hi in zip(range(-1, len(levels.bounds)), bounds[:-1], bounds[1:]):
             if hi > lo:
                 rows = order[lo:hi]
                 block, block_index = self._pooled(J[rows], column, width, start)
-                self._residuals[k] = (rows, block)
+                self._residuals[k] = (rows, block, self._segments(lo_r[rows], hi_r[rows],
+                                                                  edges))
                 index.append(block_index)
                 start += block_index.size
         self._index = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
@@ -370,8 +395,74 @@ class _Window:
         counts = [int(is_pattern[lo:hi].sum()) for lo, hi in levels.bounds]
         if any(not is_pattern[lo:lo + k].all() for (lo, _), k in zip(levels.bounds, counts)):
             raise RuntimeError("the metric's rows of a level do not come first")
-        # per level: its first rows are the metric's, weighted by these roots (k, 1)
-        self._pattern = [(k, root[lo:lo + k, None]) for (lo, _), k in zip(levels.bounds, counts)]
+        # per level: the order of its first rows, the metric's, by band (None: as they are),
+        # their roots of D in that order (k, 1) and their segments (a, b, start, stop)
+        self._pattern = []
+        for (lo, _), k in zip(levels.bounds, counts):
+            band = self._band(span[0][lo:lo + k], span[1][lo:lo + k], edges)
+            perm = np.argsort(band, kind="stable")
+            if np.array_equal(perm, np.arange(k)):
+                perm = None
+            mine = np.arange(lo, lo + k) if perm is None else lo + perm
+            self._pattern.append((k, perm, root[mine, None],
+                                  self._segments(span[0][mine], span[1][mine], edges)))
+
+    def _spans(self, levels: _Levels, column: np.ndarray, n_m: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The first and last pool column (each (n_s,)) in which each state row of S can be
+        nonzero, widened to hold the corner's column ``mid``: a level's rows read the design
+        columns and the earlier rows of their marching equations."""
+        n_d, n_s, W = levels.n_d, levels.n_s, levels.W
+        first, last = np.full(n_s, self.mid), np.full(n_s, self.mid)
+        for lo, hi in levels.bounds:
+            start, stop = W.indptr[lo], W.indptr[hi]
+            cols = W.indices[start:stop]
+            design = cols < n_d
+            state = np.where(design, 0, cols - n_d)
+            a = np.where(design, column[np.minimum(cols, n_d - 1)], first[state])
+            b = np.where(design, column[np.minimum(cols, n_d - 1)], last[state])
+            counts = np.diff(W.indptr[lo:hi + 1])
+            has = counts > 0
+            starts = (W.indptr[lo:hi] - start)[has]
+            first[lo:hi][has] = np.minimum(np.minimum.reduceat(a, starts), self.mid)
+            last[lo:hi][has] = np.maximum(np.maximum.reduceat(b, starts), self.mid)
+        return first, last
+
+    def _residual_spans(self, J: sp.csr_matrix, column: np.ndarray,
+                        span: tuple[np.ndarray, np.ndarray], n_d: int
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_spans` of the residual rows (each (n_r,)), over their entries in J."""
+        coo = J.tocoo()
+        pooled = column[coo.col] >= 0
+        state = np.maximum(coo.col - n_d, 0)
+        design = coo.col < n_d
+        a = np.where(design, column[np.minimum(coo.col, n_d - 1)], span[0][state])
+        b = np.where(design, column[np.minimum(coo.col, n_d - 1)], span[1][state])
+        first, last = np.full(J.shape[0], self.mid), np.full(J.shape[0], self.mid)
+        np.minimum.at(first, coo.row[pooled], a[pooled])
+        np.maximum.at(last, coo.row[pooled], b[pooled])
+        return first, last
+
+    @staticmethod
+    def _band(first: np.ndarray, last: np.ndarray, edges: np.ndarray) -> np.ndarray:
+        """The key of the range of bands that holds columns first..last, per row."""
+        bands = edges.size - 1
+        return (np.searchsorted(edges, first, "right") - 1) * bands + np.searchsorted(
+            edges, last, "right") - 1
+
+    @staticmethod
+    def _segments(first: np.ndarray, last: np.ndarray, edges: np.ndarray) -> list[tuple]:
+        """Rows sorted by their band key as runs (a, b, start, stop): rows start:stop hold
+        their nonzeros in the columns a:b (band edges)."""
+        if not first.size:
+            return []
+        low = np.searchsorted(edges, first, "right") - 1
+        high = np.searchsorted(edges, last, "right")
+        change = np.flatnonzero((np.diff(low) != 0) | (np.diff(high) != 0)) + 1
+        starts = np.concatenate([[0], change])
+        stops = np.concatenate([change, [first.size]])
+        return [(int(edges[low[i]]), int(edges[high[i]]), int(i), int(j))
+                for i, j in zip(starts, stops)]
 
     def _pooled(self, block: sp.csr_matrix, column: np.ndarray, width: int, start: int
                 ) -> tuple[sp.csr_matrix, np.ndarray]:
@@ -420,14 +511,16 @@ class _Window:
         Jf = self._free.toarray()  # the free columns of J (n_r, n_f): S is zero in them
         if lift is not None:
             Jf[self._lifted_rows] += lift.product()
-        sums = _Sums(n_m, Jf, r)
+        sums = _Sums(n_m, self.mid, Jf, r)
         self._reduce(-1, pool, sums)
-        for k, ((lo, hi), W, (mine, root)) in enumerate(zip(self.levels.bounds, self._blocks,
-                                                            self._pattern)):
+        for k, ((lo, hi), W, (mine, perm, root, segments)) in enumerate(
+                zip(self.levels.bounds, self._blocks, self._pattern)):
             S = W @ pool
             pool[n_m + self._slot[lo:hi]] = S
             if metric and mine:
-                sums.metric.add(S[:mine], scale=root)
+                rows = S[:mine] if perm is None else S[perm]
+                for a, b, start, stop in segments:
+                    sums.metric.add(a, b, rows[start:stop, a:b], scale=root[start:stop])
             self._reduce(k, pool, sums)
         out = sums.total(self.marching, self.free, metric)
         return out if all(a is None or np.all(np.isfinite(a)) for a in out) else None
@@ -435,36 +528,53 @@ class _Window:
     def _reduce(self, k: int, pool: np.ndarray, sums: "_Sums") -> None:
         """The residual rows reduced at level k added to the sums (in place)."""
         if k in self._residuals:
-            rows, pooled = self._residuals[k]
-            sums.add(pooled @ pool, rows)
+            rows, pooled, segments = self._residuals[k]
+            Jm = pooled @ pool
+            for a, b, start, stop in segments:
+                sums.add(Jm[start:stop], rows[start:stop], a, b)
+
+
+def _bands(n: int) -> np.ndarray:
+    """The edges (bands + 1,) of the bands the n pool columns are cut into for the Gram
+    matrices (:class:`_Gram`): one below 2 :data:`BAND_WIDTH` columns, at most
+    :data:`BANDS`."""
+    bands = max(1, min(BANDS, n // BAND_WIDTH))
+    return np.linspace(0, n, bands + 1).round().astype(np.int64)
 
 
 class _Sums:
     """The sums of one pass over the levels: the Gram matrix of the residual rows [J_m J_f
     r] (n_m marching columns, n_f free ones: ``Jf``, (n_r, n_f), J's free columns, in which
     S is zero; r (n_r,)), which holds J' J and J' r, and the metric's over the marching
-    columns. One syrk each, no products of their own: on this machine a threaded gemm
-    followed by a Cholesky factorisation took ms instead of us (OpenBLAS, two threads)."""
+    columns: one syrk each and no products of their own (with two OpenBLAS threads, separate
+    products slowed the whole solve down: docs/solvers.md). In the residuals' Gram matrix
+    the n_f + 1 columns of J_f and r sit at the corner's column ``mid``, inside every
+    row's range of columns (:class:`_Window`)."""
 
-    def __init__(self, n_m: int, Jf: np.ndarray, r: np.ndarray):
-        self.Jf, self.r = Jf, r[:, None]
-        self.n_m, self.n_f = n_m, Jf.shape[1]
-        self.jacobian, self.metric = _Gram(n_m + self.n_f + 1), _Gram(n_m)
+    def __init__(self, n_m: int, mid: int, Jf: np.ndarray, r: np.ndarray):
+        self.Jf, self.r, self.mid = Jf, r[:, None], mid
+        self.extra = Jf.shape[1] + 1
+        self.jacobian, self.metric = _Gram(n_m + self.extra), _Gram(n_m)
 
-    def add(self, Jm: np.ndarray, rows: np.ndarray) -> None:
+    def add(self, Jm: np.ndarray, rows: np.ndarray, a: int, b: int) -> None:
         """Residual rows ``rows`` (k,): their reduced Jacobian in the marching columns Jm
-        (k, n_m)."""
-        self.jacobian.add(Jm, self.Jf[rows], self.r[rows])
+        (k, n_m), nonzero only in the columns a:b (a <= mid <= b)."""
+        mid = self.mid
+        self.jacobian.add(a, b + self.extra, Jm[:, a:mid], self.Jf[rows], self.r[rows],
+                          Jm[:, mid:b])
 
     def total(self, marching: np.ndarray, free: np.ndarray, metric: bool = True) -> tuple:
         """(J' J, J' r, S_p' D_p S_p) in the design's order (n_d = n_m + n_f); the last
         None without ``metric``."""
-        order = np.concatenate([marching, free])
+        mid, n_f = self.mid, free.size
+        order = np.concatenate([marching[:mid], free, marching[mid:]])  # the Gram's, less r
+        keep = np.concatenate([np.arange(mid + n_f), mid + n_f + 1 + np.arange(marching.size
+                                                                               - mid)])
         gram = self.jacobian.total()
         n = order.size
         JtJ, grad = np.zeros((n, n)), np.zeros(n)
-        JtJ[np.ix_(order, order)] = gram[:n, :n]
-        grad[order] = gram[:n, n]
+        JtJ[np.ix_(order, order)] = gram[np.ix_(keep, keep)]
+        grad[order] = gram[keep, mid + n_f]
         if not metric:
             return JtJ, grad, None
         M = np.zeros((n, n))
@@ -473,25 +583,34 @@ class _Sums:
 
 
 class _Gram:
-    """A' A (n x n) of rows A added a block at a time: gathered into a buffer of
-    :data:`GRAM_ROWS` rows, each full buffer one BLAS syrk into the upper triangle."""
+    """A' A (n x n) of rows A added a block at a time, each block nonzero only in the
+    columns a:b: gathered per range into a buffer (:data:`GRAM_ROWS` rows for the whole
+    range, :data:`BAND_ROWS` for a part), each full buffer one BLAS syrk added into the
+    range's diagonal block of the upper triangle."""
 
     def __init__(self, n: int):
+        self.n = n
         self._upper = np.zeros((n, n), order="F")
-        self._buffer = np.empty((GRAM_ROWS, n))
-        self._used = 0
+        self._buffers: dict[tuple[int, int], list] = {}  # (a, b) -> [buffer, rows used]
 
-    def add(self, *parts: np.ndarray, scale: np.ndarray | None = None) -> None:
-        """Add rows (k, n), given as blocks of columns side by side (k, n_i), each row times
-        its ``scale`` (k, 1) if given."""
+    def add(self, a: int, b: int, *parts: np.ndarray, scale: np.ndarray | None = None
+            ) -> None:
+        """Add rows (k, n) nonzero only in the columns a:b, given as those columns' blocks
+        side by side (k, n_i), each row times its ``scale`` (k, 1) if given."""
         k = parts[0].shape[0]
-        if self._used + k > GRAM_ROWS:
-            self._flush()
-        if k > GRAM_ROWS:
+        entry = self._buffers.get((a, b))
+        if entry is None:
+            size = GRAM_ROWS if b - a == self.n else BAND_ROWS
+            entry = self._buffers[(a, b)] = [np.empty((size, b - a)), 0]
+        buffer, used = entry
+        if used + k > buffer.shape[0]:
+            self._flush(a, b)
+            used = 0
+        if k > buffer.shape[0]:
             rows = np.hstack(parts)
-            self._syrk(rows if scale is None else rows * scale)
+            self._syrk(a, b, rows if scale is None else rows * scale)
             return
-        out, column = self._buffer[self._used:self._used + k], 0
+        out, column = buffer[used:used + k], 0
         for part in parts:
             into = out[:, column:column + part.shape[1]]
             if scale is None:
@@ -499,22 +618,27 @@ class _Gram:
             else:
                 np.multiply(part, scale, out=into)
             column += part.shape[1]
-        self._used += k
+        entry[1] = used + k
 
     def total(self) -> np.ndarray:
         """The symmetric sum (n, n)."""
-        self._flush()
+        for a, b in self._buffers:
+            self._flush(a, b)
         upper = self._upper
         return np.triu(upper) + np.triu(upper, 1).T
 
-    def _flush(self) -> None:
-        if self._used:
-            self._syrk(self._buffer[:self._used])
-            self._used = 0
+    def _flush(self, a: int, b: int) -> None:
+        entry = self._buffers[(a, b)]
+        if entry[1]:
+            self._syrk(a, b, entry[0][:entry[1]])
+            entry[1] = 0
 
-    def _syrk(self, rows: np.ndarray) -> None:
-        self._upper = la.blas.dsyrk(1.0, rows.T, beta=1.0, c=self._upper, trans=0, lower=0,
-                                    overwrite_c=1)
+    def _syrk(self, a: int, b: int, rows: np.ndarray) -> None:
+        if b - a == self.n:
+            self._upper = la.blas.dsyrk(1.0, rows.T, beta=1.0, c=self._upper, trans=0,
+                                        lower=0, overwrite_c=1)
+        else:
+            self._upper[a:b, a:b] += la.blas.dsyrk(1.0, rows.T, trans=0, lower=0)
 
 
 class Manifold:
@@ -605,8 +729,11 @@ class Manifold:
         off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
         sizes = np.cumsum([0] + [rows.size for rows in self.levels])
         self._sweeps = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
+        position = (np.zeros(self.design.size) if self.nlp.boundary_position is None else
+                    np.nan_to_num(self.nlp.boundary_position[self.design], nan=0.0))
         self._window = _Window(self._sweeps, sp.hstack([J[:, self.design], J[:, self.state]]),
-                               self.pattern, self.pattern_weights, free, lifted_rows)
+                               self.pattern, self.pattern_weights, free, lifted_rows,
+                               position)
 
     def _lifted(self) -> tuple[np.ndarray, np.ndarray]:
         """With a lifted residual Jacobian: the design positions of its lifted columns that
@@ -888,16 +1015,16 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
     B = np.zeros((man.design.size, man.design.size))
-    augmented, scale, error, last, m_last = False, None, None, None, None
+    augmented, scale, error, last, kept = False, None, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
         lin = m = None  # the last point's derivatives go before the next are built
-        lin = man.linearize(p, metric=m_last is None or lam >= METRIC_DAMPING)
+        lin = man.linearize(p, metric=kept is None or lam >= METRIC_DAMPING)
         if lin is None:
             status = "Stalled"
             break
-        m = _model(man, p, lin, m_last)
-        m_last = m.M
+        m = _model(man, p, lin, kept)
+        kept = m.M
         if last is not None:
             B = _secant(B, last.step, *last.gradient_change(m, steps))
         if augmented and _positive_definite(m.H + B + lam * m.M):

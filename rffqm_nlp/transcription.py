@@ -71,6 +71,11 @@ class NLP:
     free_target: ca.Function | None = None
     #: indices in x of that correspondence's controls, Cu then Cv (each column-major)
     grid_index: np.ndarray | None = None
+    #: per entry of x that is boundary data, its place along the boundary: the left edge
+    #: from its top (-N) down to the corner (0), then the bottom edge (to M), a side halfway
+    #: between its vertices; NaN elsewhere. The state at vertex (i, j) reads only the
+    #: boundary data in [-i, j] (:mod:`rffqm_nlp.reduced` uses it to order the design)
+    boundary_position: np.ndarray | None = None
     #: the Jacobians of the residuals and of g assembled from local stencils
     #: (:mod:`rffqm_nlp.stencils`), for :mod:`rffqm_nlp.reduced`; None: only CasADi's
     #: Jacobians of the whole graph
@@ -852,6 +857,12 @@ def simultaneous(setup: Setup) -> NLP:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
     folded = ca.Function("folded", [x], Y)
+    position = np.full(lay.size, np.nan)
+    for name in ("A", "B"):
+        position[lay.index(name, slice(None), 0)] = -np.arange(n1)
+        position[lay.index(name, 0, slice(1, None))] = np.arange(1, m1)
+    position[lay.index("LV", slice(None), 0)] = -(np.arange(N) + 0.5)
+    position[lay.index("LH", 0, slice(None))] = np.arange(M) + 0.5
 
     lengths = np.zeros(lay.size, dtype=bool)
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
@@ -867,6 +878,7 @@ def simultaneous(setup: Setup) -> NLP:
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
                damping_weights=weights, design_index=design,
                pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
+               boundary_position=position,
                grid_index=None if corr is None else grid_index,
                r_jacobian=_residual_jacobian(setup, lay, res.numel()),
                g_jacobian=_constraint_jacobian(setup, lay, start.sigma, tree, g.numel()))

@@ -110,6 +110,38 @@ def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity():
         _assert_level_pass_matches_dense(man, seed)
 
 
+@pytest.mark.parametrize("width, correspondence", [(8, "free"), (16, "free"),
+                                                   (12, "lattice")])
+def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, width,
+                                                               correspondence):
+    """With the Gram matrices cut into bands (forced at this size): every row of S is zero
+    outside the columns its span gives (the boundary data from the corner to its vertex),
+    the spans are narrower than the pool, and the pass gives the dense products."""
+    monkeypatch.setattr(reduced, "BAND_WIDTH", width)
+    prob, _ = small("quarter_vase", correspondence=correspondence)
+    man = reduced.Manifold(prob.transcribe())
+    window = man._window
+    assert reduced._bands(window.marching.size).size > 3
+    p = man.point(man.nlp.project(man.nlp.x0))
+    lin = man.linearize(p)
+    S = lin.state_change(np.eye(man.design.size))[:, window.marching]  # the pool's columns
+    first, last = window._spans(lin.levels, _pool_columns(man), window.marching.size)
+    columns = np.arange(S.shape[1])
+    outside = (columns < first[:, None]) | (columns > last[:, None])
+    assert np.all(S[outside] == 0)
+    assert np.mean(last - first + 1) < 0.75 * window.marching.size
+    _assert_level_pass_matches_dense(man, 0)
+
+
+def _pool_columns(man: reduced.Manifold) -> np.ndarray:
+    """The pool column of each design and state variable of the pass (-1: a free one)."""
+    window = man._window
+    column = np.full(man.design.size + man.state.size, -1, dtype=np.int64)
+    column[window.marching] = np.arange(window.marching.size)
+    column[man.design.size:] = window.marching.size + window._slot
+    return column
+
+
 def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     nlp, rng = man.nlp, np.random.default_rng(seed)
     x = nlp.x0.copy()
