@@ -361,7 +361,7 @@ class _Window:
         self._slot = slot
         self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
                         for lo, hi in levels.bounds]
-        span = self._spans(levels, column, n_m)
+        span = self._spans(levels, column)
         edges = _bands(n_m)
         # residual rows by level, in the order of their bands: (rows, their part in the
         # pool's columns, k x width, whose data is a view of one array refilled once a pass
@@ -407,8 +407,7 @@ class _Window:
             self._pattern.append((k, perm, root[mine, None],
                                   self._segments(span[0][mine], span[1][mine], edges)))
 
-    def _spans(self, levels: _Levels, column: np.ndarray, n_m: int
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _spans(self, levels: _Levels, column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The first and last pool column (each (n_s,)) in which each state row of S can be
         nonzero, widened to hold the corner's column ``mid``: a level's rows read the design
         columns and the earlier rows of their marching equations."""

@@ -125,7 +125,7 @@ def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, widt
     p = man.point(man.nlp.project(man.nlp.x0))
     lin = man.linearize(p)
     S = lin.state_change(np.eye(man.design.size))[:, window.marching]  # the pool's columns
-    first, last = window._spans(lin.levels, _pool_columns(man), window.marching.size)
+    first, last = window._spans(lin.levels, _pool_columns(man))
     columns = np.arange(S.shape[1])
     outside = (columns < first[:, None]) | (columns > last[:, None])
     assert np.all(S[outside] == 0)
