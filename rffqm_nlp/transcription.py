@@ -907,7 +907,41 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int
                                    lay.size)
 
 
-class _ResidualStencils:
+class _StencilRows:
+    """Rows of a vector of functions stated as stencils (:mod:`rffqm_nlp.stencils`), block
+    after block: each block takes the next rows (:meth:`_rows`)."""
+
+    FOLDED = ("Yx", "Yy", "Yz")
+
+    def __init__(self, lay: _Layout):
+        self.lay = lay
+        self.stencils: list[stencils.Stencil] = []
+        self._next = 0
+
+    def _rows(self, *shapes) -> list[np.ndarray]:
+        """The next rows: one column-major block per shape."""
+        blocks = []
+        for s in shapes:
+            blocks.append(self._next + np.arange(np.prod(s)).reshape(s, order="F"))
+            self._next += blocks[-1].size
+        return blocks
+
+    def _add(self, name: str, z: list, p: list, expr: list, columns: list, rows: list,
+             params: list = ()) -> None:
+        """A stencil of the expressions ``expr`` in the symbols z and p, with per-input,
+        per-output and per-param index arrays of one shape (:func:`stencils.repeated`)."""
+        f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
+                        [ca.vertcat(*expr)])
+        self.stencils.append(stencils.repeated(f, columns, rows, list(params)))
+
+    def _whole(self, name: str, inputs: list[ca.SX], expr: ca.SX, columns: np.ndarray
+               ) -> None:
+        """One instance on the variables ``columns`` (in the order of ``inputs``)."""
+        self.stencils.append(stencils.single(name, inputs, expr, columns,
+                                             self._rows((expr.numel(),))[0]))
+
+
+class _ResidualStencils(_StencilRows):
     """The rows of :func:`_objective_residuals` as stencils: the position term at every
     lattice point (its 3 rows), the fundamental forms at every interior lattice point (its
     row in each of the 6 blocks), and the rows on the design alone
@@ -915,15 +949,12 @@ class _ResidualStencils:
     free correspondence's controls. With a free correspondence the columns go on past x
     into the target lattice (Tx, Ty, Tz, each column-major over the lattice)."""
 
-    FOLDED = ("Yx", "Yy", "Yz")
-
     def __init__(self, setup: Setup, lay: _Layout):
-        self.setup, self.lay = setup, lay
+        super().__init__(lay)
+        self.setup = setup
         N, M = lay.shapes["LV"][0], lay.shapes["LH"][1]
         self.n1, self.m1 = N // 2 + 1, M // 2 + 1
         self.free = setup.correspondence is not None
-        self.stencils: list[stencils.Stencil] = []
-        self._next = 0
 
     def jacobian(self, n_r: int) -> stencils.LocalJacobian:
         weights = self.setup.weights
@@ -931,7 +962,7 @@ class _ResidualStencils:
             self._forms(weights["forms"])
         if weights.get("position", 0) > 0:
             self._position(weights["position"])
-        self._design(n_r)
+        self._design()
         n_t = 3 * self.n1 * self.m1 if self.free else 0
         return stencils.LocalJacobian(self.stencils, [], (n_r, self.lay.size + n_t))
 
@@ -943,21 +974,6 @@ class _ResidualStencils:
             return mine
         n = self.n1 * self.m1
         return mine + [self.lay.size + c * n + i + self.n1 * j for c in range(3)]
-
-    def _rows(self, count: int, shape: tuple[int, int]) -> list[np.ndarray]:
-        """The next ``count`` blocks of rows of one (column-major) shape."""
-        size = shape[0] * shape[1]
-        rows = [self._next + k * size + np.arange(size).reshape(shape, order="F")
-                for k in range(count)]
-        self._next += count * size
-        return rows
-
-    def _add(self, name: str, z: list[ca.SX], p: list[ca.SX], expr: ca.SX,
-             columns: list[np.ndarray], rows: list[np.ndarray], params: list[np.ndarray]
-             ) -> None:
-        f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
-                        [expr])
-        self.stencils.append(stencils.repeated(f, columns, rows, params))
 
     def _forms(self, weight: float) -> None:
         """(eq:optInverse) at the interior lattice point (a, b): its 3 x 3 neighbourhood's
@@ -977,8 +993,8 @@ class _ResidualStencils:
             p = [ca.SX.sym(f"form{k}") for k in range(6)]
             theirs, params = p, list(shape.fundamental_forms(self.setup.target))
         res = ca.vertcat(*(m - t for m, t in zip(mine, theirs))) / self.setup.spacing ** 2
-        self._add("forms", z, p, np.sqrt(weight / (6 * ni * mi)) * res, columns,
-                  self._rows(6, (ni, mi)), params)
+        self._add("forms", z, p, [np.sqrt(weight / (6 * ni * mi)) * res], columns,
+                  self._rows(*[(ni, mi)] * 6), params)
 
     def _position(self, weight: float) -> None:
         """R r + t minus the target at every lattice point, as in :func:`loss_residuals`
@@ -998,13 +1014,10 @@ class _ResidualStencils:
             params = [self.setup.target[..., c] for c in range(3)]
         moved = ca.mtimes(rotation_from_quaternion(rigid[:4]), ca.vertcat(*y))
         res = (moved + ca.vertcat(*rigid[4:]) - ca.vertcat(*target)) / self.setup.spacing
-        n = self.n1 * self.m1
-        rows = self._next + np.arange(3 * n).reshape((3, n), order="F")
-        self._next += 3 * n
-        self._add("position", z, p, np.sqrt(weight / n) * res, columns,
-                  [r.reshape((self.n1, self.m1), order="F") for r in rows], params)
+        self._add("position", z, p, [np.sqrt(weight / i.size) * res], columns,
+                  list(self._rows((3, self.n1, self.m1))[0]), params)
 
-    def _design(self, n_r: int) -> None:
+    def _design(self) -> None:
         """The rows after the loss: one instance of :func:`_design_residuals`."""
         lay, corr = self.lay, self.setup.correspondence
         rigid = ca.SX.sym("rigid", 7)
@@ -1017,11 +1030,8 @@ class _ResidualStencils:
             grid = tuple(ca.SX.sym(n, *corr.shape) for n in ("U", "V"))
             inputs += list(grid)
             columns += [np.arange(lay.slices[n].start, lay.slices[n].stop) for n in ("U", "V")]
-        expr = _design_residuals(self.setup, rigid, bvec, grid)
-        self.stencils.append(stencils.single("design_residuals", inputs, expr,
-                                             np.concatenate(columns),
-                                             np.arange(self._next, n_r)))
-        self._next = n_r
+        self._whole("design_residuals", inputs, _design_residuals(self.setup, rigid, bvec, grid),
+                    np.concatenate(columns))
 
 
 def _boundary_columns(lay: _Layout) -> np.ndarray:
@@ -1050,20 +1060,19 @@ def _symbols(name: str, k: int) -> list[ca.SX]:
     return [ca.SX.sym(f"{name}{c}") for c in range(k)]
 
 
-class _ConstraintStencils:
+class _ConstraintStencils(_StencilRows):
     """The rows of :func:`simultaneous`'s g as stencils (:mod:`rffqm_nlp.stencils`): the
     same equations, each on one panel's or vertex's own variables. One method per block of
     rows, called in g's order, each taking the next rows."""
 
-    QUAT, FOLDED = ("Qw", "Qx", "Qy", "Qz"), ("Yx", "Yy", "Yz")
+    QUAT = ("Qw", "Qx", "Qy", "Qz")
 
     def __init__(self, setup: Setup, lay: _Layout, sigma: np.ndarray, tree: _MeanTree):
-        self.setup, self.lay, self.sigma, self.tree = setup, lay, sigma, tree
+        super().__init__(lay)
+        self.setup, self.sigma, self.tree = setup, sigma, tree
         self.N, self.M = sigma.shape[0] - 1, sigma.shape[1] - 1
         self.kh0, _ = _fold_multipliers_kv(sigma)
-        self.stencils: list[stencils.Stencil] = []
         self.constants: list[stencils.Constant] = []
-        self._next = 0
 
     def jacobian(self, n_g: int) -> stencils.LocalJacobian:
         N, M = self.N, self.M
@@ -1086,28 +1095,6 @@ class _ConstraintStencils:
 
     def _omega(self, shape) -> np.ndarray:
         return np.full(shape, self.lay.slices["omega"].start)
-
-    def _rows(self, *shapes) -> list[np.ndarray]:
-        """The next rows of g: one column-major block per shape."""
-        blocks = []
-        for s in shapes:
-            blocks.append(self._next + np.arange(np.prod(s)).reshape(s, order="F"))
-            self._next += blocks[-1].size
-        return blocks
-
-    def _add(self, name: str, z: list, p: list, expr: list, columns: list, rows: list,
-             params: list = ()) -> None:
-        """A stencil of the expressions ``expr`` in the symbols z and p, with per-input,
-        per-output and per-param index arrays of one shape (:func:`stencils.repeated`)."""
-        f = ca.Function(name, [ca.vertcat(*z), ca.vertcat(*p) if p else ca.SX.sym("p", 0)],
-                        [ca.vertcat(*expr)])
-        self.stencils.append(stencils.repeated(f, columns, rows, list(params)))
-
-    def _whole(self, name: str, inputs: list[ca.SX], expr: ca.SX, columns: np.ndarray
-               ) -> None:
-        """One instance on the variables ``columns`` (in the order of ``inputs``)."""
-        self.stencils.append(stencils.single(name, inputs, expr, columns,
-                                             self._rows((expr.numel(),))[0]))
 
     # ------------------------------------------------------------------ blocks of g
     def _cells(self, rows: list[np.ndarray]) -> None:
