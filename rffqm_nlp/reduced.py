@@ -366,7 +366,7 @@ class _Window:
         # residual rows by level, in the order of their bands: (rows, their part in the
         # pool's columns, k x width, whose data is a view of one array refilled once a pass
         # from J's nonzeros at _index, and the segments (a, b, start, stop) of one range)
-        lo_r, hi_r = self._residual_spans(J, column, span, n_d)
+        lo_r, hi_r = self._residual_spans(Jcoo, column, span, n_d)
         order = np.lexsort((self._band(lo_r, hi_r, edges), at))
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
         self._residuals, index, start = {}, [], 0
@@ -415,11 +415,7 @@ class _Window:
         first, last = np.full(n_s, self.mid), np.full(n_s, self.mid)
         for lo, hi in levels.bounds:
             start, stop = W.indptr[lo], W.indptr[hi]
-            cols = W.indices[start:stop]
-            design = cols < n_d
-            state = np.where(design, 0, cols - n_d)
-            a = np.where(design, column[np.minimum(cols, n_d - 1)], first[state])
-            b = np.where(design, column[np.minimum(cols, n_d - 1)], last[state])
+            a, b = self._entry_spans(W.indices[start:stop], column, first, last, n_d)
             counts = np.diff(W.indptr[lo:hi + 1])
             has = counts > 0
             starts = (W.indptr[lo:hi] - start)[has]
@@ -427,20 +423,28 @@ class _Window:
             last[lo:hi][has] = np.maximum(np.maximum.reduceat(b, starts), self.mid)
         return first, last
 
-    def _residual_spans(self, J: sp.csr_matrix, column: np.ndarray,
+    def _residual_spans(self, coo: sp.coo_matrix, column: np.ndarray,
                         span: tuple[np.ndarray, np.ndarray], n_d: int
                         ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_spans` of the residual rows (each (n_r,)), over their entries in J."""
-        coo = J.tocoo()
+        """:meth:`_spans` of the residual rows (each (n_r,)), over their entries in J
+        (``coo``)."""
         pooled = column[coo.col] >= 0
-        state = np.maximum(coo.col - n_d, 0)
-        design = coo.col < n_d
-        a = np.where(design, column[np.minimum(coo.col, n_d - 1)], span[0][state])
-        b = np.where(design, column[np.minimum(coo.col, n_d - 1)], span[1][state])
-        first, last = np.full(J.shape[0], self.mid), np.full(J.shape[0], self.mid)
+        a, b = self._entry_spans(coo.col, column, *span, n_d)
+        first, last = np.full(coo.shape[0], self.mid), np.full(coo.shape[0], self.mid)
         np.minimum.at(first, coo.row[pooled], a[pooled])
         np.maximum.at(last, coo.row[pooled], b[pooled])
         return first, last
+
+    @staticmethod
+    def _entry_spans(cols: np.ndarray, column: np.ndarray, first: np.ndarray,
+                     last: np.ndarray, n_d: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per variable ``cols`` (indices into [design, state]): the first and last pool
+        column of its row of S, a design variable's own column, a state variable's from
+        ``first`` and ``last`` (n_s,)."""
+        design = cols < n_d
+        own = column[np.minimum(cols, n_d - 1)]
+        state = np.maximum(cols - n_d, 0)
+        return np.where(design, own, first[state]), np.where(design, own, last[state])
 
     @staticmethod
     def _band(first: np.ndarray, last: np.ndarray, edges: np.ndarray) -> np.ndarray:
