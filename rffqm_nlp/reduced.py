@@ -16,16 +16,17 @@ Jacobian in s is triangular after a permutation, found once from its sparsity (a
 of equations to unknowns, then the longest chain of dependencies of each equation, its
 level), and the state is ordered by level. The state's sensitivity S = -C_s^{-1} C_d
 (n_s x n_d) then follows level by level: the unknowns of a level depend only on those of
-earlier levels. S is never stored whole. One pass over the levels (:class:`_Window`) keeps
-only the rows of S that a later level or a residual still needs (a working set that shrinks,
-relative to the state, as the pattern grows) and reduces them at once into the
-n_d x n_d matrices the step needs: J' J of the reduced Jacobian J = J_d + J_s S (plus, with
-a free correspondence, the controls' F_T H, kept as its factors), the gradient J' r and the
-metric below; a row of S at vertex (i, j) is nonzero only in the boundary data of the
-vertices (0..i, 0) and (0, 0..j), so its Gram products are taken over those columns
-alone. The inequality rows G_d + G_s S that a step needs come from the sweep backwards
+earlier levels. One pass over the levels (:class:`_Window`) keeps only the rows of S that a
+later level or a residual still needs (a working set that shrinks, relative to the state, as
+the pattern grows; a small S, up to :data:`WHOLE_S` entries, it keeps whole) and reduces
+them at once into the n_d x n_d matrices the step needs: J' J of the reduced Jacobian J =
+J_d + J_s S (plus, with a free correspondence, the controls' F_T H, kept as its factors),
+the gradient J' r and the metric below; a row of S at vertex (i, j) is nonzero only in the
+boundary data of the vertices (0..i, 0) and (0, 0..j), so its Gram products are taken over
+those columns alone. The inequality rows G_d + G_s S that a step needs come from the sweep backwards
 through the levels (S' applied to their state parts), and every row's change under a step
-from one forward sweep (S dd).
+from one forward sweep (S dd); where the pass kept S whole, from products with it
+(:class:`_Sensitivity`).
 
 Each iteration solves the damped, linearised problem
 
@@ -82,6 +83,9 @@ CORRECTIONS = 3
 MAX_DAMPING = 1e10
 #: entries (rows x state) of a block of rows swept back at once (:meth:`_Steps.rows`)
 BLOCK = 1 << 24
+#: entries (state x marching design) of S up to which the pass keeps it whole (8 MB, which
+#: stays in the cache: its products are then cheaper than the sweeps; docs/solvers.md)
+WHOLE_S = 1 << 20
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`), and of one
 #: band's range of columns of them
 GRAM_ROWS = 1024
@@ -138,19 +142,19 @@ class _Point:
 class _Linearization:
     """The derivatives at a point: the sparse Jacobians of r and g split by design (n_d)
     and state (n_s) columns (J_design, J_state; the inequality rows' G_design, G_state),
-    the sweeps through the marching equations there (``levels``: S = ds/dd applied to a
-    block, and its transpose), and the reduced problem's J' J, J' r and the metric's
-    S_p' D_p S_p (n_d x n_d, n_d; the last None when linearised without it), accumulated
-    level by level (:class:`_Window`) without S. With a lifted residual Jacobian
+    S = ds/dd there (``sensitivity``: applied to a block, and its transpose), and the
+    reduced problem's J' J, J' r and the metric's S_p' D_p S_p (n_d x n_d, n_d; the last
+    None when linearised without it), accumulated level by level (:class:`_Window`)
+    without storing S (unless it is small). With a lifted residual Jacobian
     (:class:`rffqm_nlp.stencils.LiftedJacobian`), J_design holds its direct part and
     ``lift`` the rest, F_u H, its columns numbered in the design.
-    Valid until the manifold linearises at the next point (``levels`` is refilled there)."""
+    Valid until the manifold linearises at the next point (the levels are refilled there)."""
 
     J_design: sp.csr_matrix
     J_state: sp.csr_matrix
     G_design: sp.csr_matrix
     G_state: sp.csr_matrix
-    levels: "_Levels"
+    sensitivity: "_Sensitivity"
     JtJ: np.ndarray
     grad: np.ndarray
     pattern_metric: np.ndarray | None
@@ -159,21 +163,21 @@ class _Linearization:
     def jacobian_times(self, X: np.ndarray) -> np.ndarray:
         """Jr X (n_r,) or (n_r, p) for X (n_d,) or (n_d, p), Jr = J_design + J_state S (+
         F_u H) the reduced Jacobian."""
-        out = self.J_design @ X + self.J_state @ self.levels.forward(X)
+        out = self.J_design @ X + self.J_state @ self.sensitivity.forward(X)
         if self.lift is not None:
             out[self.lift.rows] += self.lift.times(X)
         return out
 
     def jacobian_transpose(self, w: np.ndarray) -> np.ndarray:
         """Jr' w (n_d,) for w (n_r,)."""
-        out = self.J_design.T @ w + self.levels.adjoint(self.J_state.T @ w)
+        out = self.J_design.T @ w + self.sensitivity.adjoint(self.J_state.T @ w)
         if self.lift is not None:
             out[self.lift.columns] += self.lift.transpose_times(w)
         return out
 
     def state_change(self, dd: np.ndarray) -> np.ndarray:
         """S dd (n_s,): the state's first-order change under the design change dd (n_d,)."""
-        return self.levels.forward(dd)
+        return self.sensitivity.forward(dd)
 
 
 class _Buffered:
@@ -295,6 +299,39 @@ class _Levels:
         return Z[:self.n_d]
 
 
+@dataclass
+class _Sensitivity:
+    """S = ds/dd (n_s x n_d) at a point: by the sweeps through the ``levels``, or by
+    products with S itself where the pass kept it whole (``whole``, (n_s, n_m): its
+    marching columns ``marching``, (n_m,); S is zero in the other, free, columns)."""
+
+    levels: _Levels
+    whole: np.ndarray | None
+    marching: np.ndarray
+
+    def forward(self, X: np.ndarray) -> np.ndarray:
+        """S X (n_s,) or (n_s, p) for X (n_d,) or (n_d, p)."""
+        if self.whole is None:
+            return self.levels.forward(X)
+        return self.whole @ X[self.marching]
+
+    def adjoint(self, Y: np.ndarray) -> np.ndarray:
+        """S' Y (n_d,) or (n_d, p) for Y (n_s,) or (n_s, p)."""
+        if self.whole is None:
+            return self.levels.adjoint(Y)
+        out = np.zeros((self.levels.n_d,) + Y.shape[1:])
+        out[self.marching] = self.whole.T @ Y
+        return out
+
+    def rows(self, R: sp.csr_matrix) -> np.ndarray:
+        """R S (k, n_d) for the state rows R (k, n_s)."""
+        if self.whole is None:
+            return self.levels.adjoint(R.T.toarray()).T
+        out = np.zeros((R.shape[0], self.levels.n_d))
+        out[:, self.marching] = R @ self.whole
+        return out
+
+
 class _Window:
     """J' J, J' r and S_p' D_p S_p of the reduced problem in one pass over the levels,
     holding only the rows of S still needed (the working set) instead of all of S.
@@ -302,11 +339,13 @@ class _Window:
     Each state row gets a slot in a pool (``pool`` rows) from its level until the last
     level that uses it: the marching equations of a later level, or a residual row, which
     is reduced at the level of its latest state unknown (residual rows that use no state
-    come first). A slot freed is reused by a later level. The design variables have
-    columns in the pool (``marching``, n_m of them: the boundary data, omega and the rigid
-    alignment, in which S is zero) except the lifted ones (``free``, n_f: a free
-    correspondence's controls, which the march does not read), whose reduced Jacobian is
-    J_d's columns plus F_u H (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
+    come first). A slot freed is reused by a later level, except where S has at most
+    :data:`WHOLE_S` entries (``whole``): then every state row keeps its own slot, and the
+    pass gives S. The design variables have columns in the pool (``marching``, n_m of
+    them: the boundary data, omega and the rigid alignment, in which S is zero) except the
+    lifted ones (``free``, n_f: a free correspondence's controls, which the march does not
+    read), whose reduced Jacobian is J_d's columns plus F_u H
+    (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
 
     The pool's columns follow the boundary (``position``: the left edge from its top down
     to the corner, then the bottom edge; omega, the alignment and any design variable
@@ -343,14 +382,15 @@ class _Window:
         at = np.full(J.shape[0], -1, dtype=np.int64)  # the level each residual row is reduced
         np.maximum.at(at, Jcoo.row[state], level[Jcoo.col[state] - n_d])
         np.maximum.at(last, Jcoo.col[state] - n_d, at[Jcoo.row[state]])
-        slot = self._slots(levels.bounds, last)
-        self.pool = int(slot.max()) + 1 if n_s else 0
         if np.isin(free, W.indices[~uses]).any():
             raise RuntimeError("a lifted design variable is read by the marching equations")
         self.free = free
         marching = np.setdiff1d(np.arange(n_d), free)
         self.marching = marching[np.argsort(position[marching], kind="stable")]
         n_m = self.marching.size
+        self.whole = n_s * n_m <= WHOLE_S
+        slot = np.arange(n_s) if self.whole else self._slots(levels.bounds, last)
+        self.pool = int(slot.max()) + 1 if n_s else 0
         self.mid = int(np.sum(position[self.marching] < 0))  # the first column at the corner
         column = np.full(n_d + n_s, -1, dtype=np.int64)  # -> pool row (-1: a free column)
         column[self.marching] = np.arange(n_m)
@@ -502,10 +542,11 @@ class _Window:
 
     def __call__(self, J: np.ndarray, r: np.ndarray, lift: Lift | None,
                  metric: bool = True) -> tuple | None:
-        """(J' J, J' r, S_p' D_p S_p), in the design's order, at the residuals' Jacobian
+        """(J' J, J' r, S_p' D_p S_p, S), in the design's order, at the residuals' Jacobian
         nonzeros J (its direct part), its ``lift`` (columns in the order of ``free``) and
         the residuals r (n_r,), with the levels refilled at the same point; None where they
-        are not finite. ``metric``: False skips the metric (None in its place)."""
+        are not finite. ``metric``: False skips the metric (None in its place); S (n_s,
+        n_m; its columns ``marching``) is None unless ``whole``."""
         n_m = self.marching.size
         pool = np.zeros((n_m + self.pool, n_m))  # [I; the working set of S]
         pool[:n_m] = np.eye(n_m)
@@ -526,7 +567,9 @@ class _Window:
                     sums.metric.add(a, b, rows[start:stop, a:b], scale=root[start:stop])
             self._reduce(k, pool, sums)
         out = sums.total(self.marching, self.free, metric)
-        return out if all(a is None or np.all(np.isfinite(a)) for a in out) else None
+        if not all(a is None or np.all(np.isfinite(a)) for a in out):
+            return None
+        return (*out, pool[n_m:] if self.whole else None)
 
     def _reduce(self, k: int, pool: np.ndarray, sums: "_Sums") -> None:
         """The residual rows reduced at level k added to the sums (in place)."""
@@ -805,8 +848,10 @@ class Manifold:
             return None
         return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
                               G_design=self._G_design(G), G_state=self._G_state(G),
-                              levels=self._sweeps, JtJ=reduced[0], grad=reduced[1],
-                              pattern_metric=reduced[2], lift=lift)
+                              sensitivity=_Sensitivity(self._sweeps, reduced[3],
+                                                       self._window.marching),
+                              JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],
+                              lift=lift)
 
     def _residual_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, Lift | None]:
         """The nonzeros of the residuals' Jacobian at x (with a lift, of its direct part)
@@ -914,7 +959,7 @@ class _Steps:
         into = np.concatenate([g_rows, s_rows])
         block = max(1, BLOCK // (man.state.size + man.design.size))
         for k in range(0, into.size, block):
-            A[into[k:k + block]] += lin.levels.adjoint(state[k:k + block].T.toarray()).T
+            A[into[k:k + block]] += lin.sensitivity.rows(state[k:k + block])
         return A
 
     def __call__(self, m: _Model, lam: float, shift: np.ndarray) -> _Step | None:

@@ -101,13 +101,38 @@ def test_the_level_pass_and_the_sweeps_match_the_dense_sensitivity(manifold, see
     _assert_level_pass_matches_dense(man, seed)
 
 
-def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity():
-    """The same in the lattice mode: every design column in the pool."""
+@pytest.mark.parametrize("whole", [True, False])
+def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity(monkeypatch, whole):
+    """The same in the lattice mode: every design column in the pool; with S kept whole
+    (the default at this size) and with the working set alone."""
+    if not whole:
+        monkeypatch.setattr(reduced, "WHOLE_S", 0)
     prob, _ = small("sphere_cap", correspondence="lattice")
     man = reduced.Manifold(prob.transcribe())
     assert man._window.free.size == 0
+    assert man._window.whole == whole
     for seed in (0, 1):
         _assert_level_pass_matches_dense(man, seed)
+
+
+def test_the_solve_is_the_same_with_s_whole_and_with_the_working_set(monkeypatch):
+    """S kept whole changes how the steps' rows and sweeps are computed, not the steps:
+    the same iterations, loss and design as with the working set alone."""
+    prob, opts = small("quarter_vase")
+    modes, call = [], reduced._Window.__call__
+    monkeypatch.setattr(reduced._Window, "__call__",
+                        lambda self, *a, **k: modes.append(self.whole) or call(self, *a, **k))
+    whole = prob.solve(opts)
+    monkeypatch.setattr(reduced, "WHOLE_S", 0)
+    working = prob.solve(opts)
+    assert modes == [True] * (len(modes) - modes.count(False)) + [False] * modes.count(False)
+    assert modes.count(False) > 0 and modes.count(True) > 0
+    assert whole.stats.status == working.stats.status == "Solve_Succeeded"
+    assert whole.stats.iterations == working.stats.iterations
+    np.testing.assert_allclose(whole.stats.objective, working.stats.objective, rtol=1e-10)
+    np.testing.assert_allclose(whole.boundary.left, working.boundary.left, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(whole.boundary.bottom, working.boundary.bottom, rtol=0,
+                               atol=1e-8)
 
 
 @pytest.mark.parametrize("width, correspondence", [(8, "free"), (16, "free"),
@@ -125,7 +150,7 @@ def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, widt
     p = man.point(man.nlp.project(man.nlp.x0))
     lin = man.linearize(p)
     S = lin.state_change(np.eye(man.design.size))[:, window.marching]  # the pool's columns
-    first, last = window._spans(lin.levels, _pool_columns(man))
+    first, last = window._spans(lin.sensitivity.levels, _pool_columns(man))
     columns = np.arange(S.shape[1])
     outside = (columns < first[:, None]) | (columns > last[:, None])
     assert np.all(S[outside] == 0)
@@ -159,7 +184,8 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     close(lin.grad, Jr.T @ p.r)
     close(lin.pattern_metric, Sp.T @ Sp)
     Y = rng.standard_normal((man.state.size, 3))
-    close(lin.levels.adjoint(Y), S.T @ Y)
+    close(lin.sensitivity.adjoint(Y), S.T @ Y)
+    assert (lin.sensitivity.whole is not None) == man._window.whole
     w = rng.standard_normal(p.r.size)
     close(lin.jacobian_transpose(w), Jr.T @ w)
     m = reduced._model(man, p, lin)
@@ -179,7 +205,11 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     assert sorted(np.concatenate(swept)) == sorted(set(again) - set(which))  # the new only
     dd = rng.standard_normal(man.design.size)
     close(steps.change(m, dd), A @ dd)
-    assert man._window.pool < man.state.size
+    if man._window.whole:
+        assert man._window.pool == man.state.size
+        close(lin.sensitivity.whole, S[:, man._window.marching])
+    else:
+        assert man._window.pool < man.state.size
     bare = man.linearize(p, metric=False)  # the pass without the metric: the rest the same
     assert bare.pattern_metric is None
     close(bare.JtJ, Jr.T @ Jr)
