@@ -47,10 +47,11 @@ is then a small part of the model, and the pattern moves little a step). B estim
 part of the Hessian that Gauss-Newton drops, sum r_i Hess r_i (and the active
 inequalities' curvature), by the structured secant update of
 Dennis, Gay & Welsch ("An adaptive nonlinear least-squares algorithm", ACM TOMS 7, 1981;
-NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each accepted
-step; a step uses it when it predicted the last step's reduction better than J' J alone
-did (NL2SOL's choice), and when J' J + B + lam M is positive definite. Where the residuals
-do not vanish at the optimum Gauss-Newton converges only linearly; B speeds up the end.
+NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each of the
+last :data:`SECANT_PAIRS` accepted steps, rebuilt from zero at every iteration; a step uses
+it when it predicted the last step's reduction better than J' J alone did (NL2SOL's
+choice), and when J' J + B + lam M is positive definite. Where the residuals do not vanish
+at the optimum Gauss-Newton converges only linearly; B speeds up the end.
 
 The run stops with status "Solve_Succeeded" when the first-order optimality conditions of
 the reduced problem hold at a marched iterate (:func:`_kkt_error`): the gradient J' r
@@ -99,6 +100,10 @@ QP_ROUNDS = 10
 #: damping below which a linearisation keeps the last metric M instead of computing it
 #: (docs/solvers.md: the same iterations, within one or two, on the bundled targets)
 METRIC_DAMPING = 1e-3
+#: the accepted steps whose secant pairs make up B: NL2SOL's update applied to each in turn
+#: from zero at every iteration, so curvature learned far back is dropped instead of being
+#: sized away with what the last steps learned (docs/solvers.md)
+SECANT_PAIRS = 3
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
@@ -1024,6 +1029,16 @@ def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:
     return float(max(np.max(np.abs(residual)), np.max(complementarity)))
 
 
+def _secant_term(pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int
+                 ) -> np.ndarray:
+    """B (n, n) from the secant pairs (step, y, y_sharp) of the last accepted steps, oldest
+    first: :func:`_secant` applied to each in turn, from zero."""
+    B = np.zeros((n, n))
+    for pair in pairs:
+        B = _secant(B, *pair)
+    return B
+
+
 def _secant(B: np.ndarray, step: np.ndarray, y: np.ndarray, y_sharp: np.ndarray) -> np.ndarray:
     """B (n_d, n_d) updated over one accepted ``step`` (n_d,) (Dennis, Gay & Welsch): ``y``
     the change of the Lagrangian's gradient, ``y_sharp`` its part that Jr' Jr does not
@@ -1063,6 +1078,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
     B = np.zeros((man.design.size, man.design.size))
+    pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
     augmented, scale, error, last, kept = False, None, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
@@ -1074,7 +1090,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
         m = _model(man, p, lin, kept)
         kept = m.M
         if last is not None:
-            B = _secant(B, last.step, *last.gradient_change(m, steps))
+            pairs = (pairs + [(last.step, *last.gradient_change(m, steps))])[-SECANT_PAIRS:]
+            B = _secant_term(pairs, man.design.size)
         if augmented and _positive_definite(m.H + B + lam * m.M):
             m.H = m.H + B
         scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)

@@ -269,6 +269,50 @@ def test_success_means_a_stationary_point_of_the_marched_loss(manifold):
     assert loose.iterations < out.iterations
 
 
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), k=st.integers(1, 5))
+def test_the_secant_term_meets_the_newest_secant_pair(seed, k):
+    """B from k secant pairs (step s, y with y's > 0, any y_sharp) is symmetric and meets
+    the newest pair's secant condition B s = y_sharp whatever came before (the older pairs
+    and the sizing); no pairs give B = 0."""
+    rng = np.random.default_rng(seed)
+    n = 9
+    pairs = []
+    for _ in range(k):
+        s = rng.normal(size=n)
+        y = s * rng.uniform(0.1, 10) + 0.1 * rng.normal(size=n) * np.linalg.norm(s)
+        y = y if y @ s > 0 else -y
+        pairs.append((s, y, rng.normal(size=n)))
+    B = reduced._secant_term(pairs, n)
+    np.testing.assert_allclose(B, B.T, atol=1e-12 * np.abs(B).max())
+    s, _, y_sharp = pairs[-1]
+    np.testing.assert_allclose(B @ s, y_sharp, atol=1e-9 * (1 + np.abs(B).max()))
+    np.testing.assert_array_equal(reduced._secant_term([], n), np.zeros((n, n)))
+
+
+def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
+    """Every iteration after the first rebuilds B from the last SECANT_PAIRS accepted steps,
+    a window sliding by one step, the newest the change of the design just accepted."""
+    seen, steps = [], []
+    monkeypatch.setattr(reduced, "_secant_term", lambda pairs, n: (
+        seen.append([p[0] for p in pairs]), np.zeros((n, n)))[1])
+    last = reduced._Last.__init__
+
+    def recorded(self, m, steps_, step, change, trial):
+        steps.append(change)
+        last(self, m, steps_, step, change, trial)
+
+    monkeypatch.setattr(reduced._Last, "__init__", recorded)
+    prob, opts = small("sphere_cap")
+    stats = prob.solve(opts).stats
+    assert stats.iterations > reduced.SECANT_PAIRS + 2 and len(seen) == stats.iterations
+    for i, window in enumerate(seen):
+        expected = steps[max(0, i + 1 - reduced.SECANT_PAIRS):i + 1]
+        assert len(window) == len(expected) <= reduced.SECANT_PAIRS
+        for a, b in zip(window, expected):
+            assert a is b
+
+
 def test_every_step_is_an_admissible_design_with_a_lower_loss():
     seen = []
     prob, opts = small("sphere_cap", stop_rms=0.0125)
