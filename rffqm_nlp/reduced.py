@@ -62,7 +62,9 @@ to max(1, |J' r at the start| / 100) as IPOPT's gradient-based scaling of the ob
 
 from __future__ import annotations
 
+import functools
 import time
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -71,6 +73,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 from scipy.sparse.csgraph import maximum_bipartite_matching
+from threadpoolctl import ThreadpoolController
 
 from .errors import InputError
 from .stencils import Lift, LiftedJacobian, index_array
@@ -735,6 +738,18 @@ class Manifold:
         self.lower = self.inequalities(nlp.lbg, nlp.lbx)
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
         self._slice_jacobians(G)
+        if self._window.whole:
+            _blas()  # the libraries scanned in the build, not in the first solve
+
+    def blas_threads(self) -> AbstractContextManager:
+        """A context in which BLAS runs on one thread while the pass keeps S whole (a small
+        problem, :data:`WHOLE_S`); nothing otherwise. The dense products are then too small
+        to share, and OpenBLAS's threads, woken by a product with S, slowed the next small
+        LAPACK call (a Cholesky factor of the model) down 40 to 100 times: with two threads the
+        20 x 20 sphere cap took 2 s against 0.5 s (docs/solvers.md)."""
+        if not self._window.whole:
+            return nullcontext()
+        return _blas().limit(limits=1, user_api="blas")
 
     def _order_by_level(self, G: sp.csr_matrix, pattern: np.ndarray) -> None:
         """The matching of marching equations to state unknowns (``match``), their levels
@@ -1068,6 +1083,17 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build).
     """
     man = Manifold(nlp) if manifold is None else manifold
+    with man.blas_threads():
+        return _levenberg_marquardt(man, x, damping, max_iter, deadline, stop, callback, tol)
+
+
+def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter: int,
+                         deadline: float | None,
+                         stop: Callable[[np.ndarray], bool] | None,
+                         callback: Callable[[float, float], None] | None,
+                         tol: float) -> Outcome:
+    """:func:`levenberg_marquardt` on ``man``."""
+    nlp = man.nlp
     start = nlp.project(np.asarray(x, dtype=float))
     p = None if start is None else man.point(start)
     if p is None or man.violation(p) > FEASIBLE:
@@ -1142,6 +1168,13 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
             break
     return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
                    kkt_error=error)
+
+
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The BLAS libraries this process has loaded (threadpoolctl; scanning them takes a few
+    milliseconds, once)."""
+    return ThreadpoolController()
 
 
 def _positive_definite(H: np.ndarray) -> bool:

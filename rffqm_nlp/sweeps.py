@@ -64,6 +64,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from threadpoolctl import OpenBLASController, register, threadpool_limits
 
 from .design import FILE_KEYS, DesignProblem, SolveOptions, check_memory
 from .design import from_config as problem_from_config
@@ -428,7 +429,6 @@ def one_thread() -> AbstractContextManager:
     cluster run's table.
     """
     import casadi
-    from threadpoolctl import threadpool_limits
 
     _register_casadi_openblas()
     casadi.has_nlpsol("ipopt")
@@ -437,8 +437,6 @@ def one_thread() -> AbstractContextManager:
 
 @functools.cache
 def _register_casadi_openblas() -> None:
-    from threadpoolctl import OpenBLASController, register
-
     class CasadiOpenBLAS(OpenBLASController):
         """The OpenBLAS that CasADi ships for its MUMPS (libcasadi-tp-openblas)."""
 
@@ -739,7 +737,7 @@ def write_table(out: Path, study: Study, designs: list[Design],
 # --------------------------------------------------------------------------- helpers
 def _require_extra(serial: bool) -> None:
     """Raise with the install command when the ``sweep`` extra's packages are missing."""
-    needed = ("pandas", "pyarrow", "threadpoolctl") + (() if serial else ("distributed",))
+    needed = ("pandas", "pyarrow") + (() if serial else ("distributed",))
     missing = [name for name in needed if importlib.util.find_spec(name) is None]
     if missing:
         raise RffqmError(f"sweeps need {', '.join(missing)}: pip install 'rffqm_nlp[sweep]'")

@@ -313,6 +313,39 @@ def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
             assert a is b
 
 
+def _blas_threads() -> set[int]:
+    from threadpoolctl import threadpool_info
+
+    return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+
+def test_blas_runs_on_one_thread_while_s_is_whole(manifold, monkeypatch):
+    """The run (and Manifold.blas_threads) limits BLAS to one thread when the pass keeps S
+    whole, and leaves it as it was otherwise; the limit ends with the run."""
+    from threadpoolctl import threadpool_limits
+
+    prob, man = manifold
+    assert man._window.whole
+    monkeypatch.setattr(reduced, "WHOLE_S", 0)
+    large = reduced.Manifold(prob.transcribe())
+    assert not large._window.whole
+    seen = []
+    run = reduced._levenberg_marquardt
+    monkeypatch.setattr(reduced, "_levenberg_marquardt",
+                        lambda *a: (seen.append(_blas_threads()), run(*a))[1])
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert _blas_threads() == {2}
+        with man.blas_threads():
+            assert _blas_threads() == {1}
+        assert _blas_threads() == {2}
+        with large.blas_threads():
+            assert _blas_threads() == {2}
+        out = reduced.levenberg_marquardt(man.nlp, man.nlp.x0, 0.03, 2, manifold=man)
+        assert out.iterations == 2 and seen == [{1}] and _blas_threads() == {2}
+        reduced.levenberg_marquardt(large.nlp, large.nlp.x0, 0.03, 2, manifold=large)
+        assert seen == [{1}, {2}]
+
+
 def test_every_step_is_an_admissible_design_with_a_lower_loss():
     seen = []
     prob, opts = small("sphere_cap", stop_rms=0.0125)
