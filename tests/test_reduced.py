@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg as la
 from hypothesis import given, settings, strategies as st
+from threadpoolctl import threadpool_info, threadpool_limits
 
 import rffqm_nlp as rq
 from rffqm_nlp import numpy_model, reduced
@@ -314,16 +315,12 @@ def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
 
 
 def _blas_threads() -> set[int]:
-    from threadpoolctl import threadpool_info
-
     return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
 
 
 def test_blas_runs_on_one_thread_while_s_is_whole(manifold, monkeypatch):
     """The run (and Manifold.blas_threads) limits BLAS to one thread when the pass keeps S
     whole, and leaves it as it was otherwise; the limit ends with the run."""
-    from threadpoolctl import threadpool_limits
-
     prob, man = manifold
     assert man._window.whole
     monkeypatch.setattr(reduced, "WHOLE_S", 0)
