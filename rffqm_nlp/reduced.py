@@ -745,8 +745,8 @@ class Manifold:
         """A context in which BLAS runs on one thread while the pass keeps S whole (a small
         problem, :data:`WHOLE_S`); nothing otherwise. The dense products are then too small
         to share, and OpenBLAS's threads, woken by a product with S, slowed the next small
-        LAPACK call (a Cholesky factor of the model) down 40 to 100 times: with two threads the
-        20 x 20 sphere cap took 2 s against 0.5 s (docs/solvers.md)."""
+        LAPACK call (a Cholesky factor of the model) down many times over (measured in
+        docs/solvers.md)."""
         if not self._window.whole:
             return nullcontext()
         return _blas().limit(limits=1, user_api="blas")
