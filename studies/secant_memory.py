@@ -21,13 +21,13 @@ Writes studies/results/secant_memory.md.
 from __future__ import annotations
 
 import argparse
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem, write_table
-from rffqm_nlp import load_design, reduced
+from rffqm_nlp import reduced
+from rffqm_nlp.design import from_config
 
 SURFACES = ("saddle", "cylinder", "paraboloid", "ellipsoid_cap", "torus_patch",
             "gaussian_bump")
@@ -50,11 +50,8 @@ def solve(memory: int, kind: str, name: str, n: int) -> dict:
         if kind == "target":
             problem, options = target_problem(name, n)
         else:
-            with tempfile.TemporaryDirectory() as folder:
-                path = Path(folder) / f"{name}.toml"
-                path.write_text(f'[target]\nname = "{name}"\n\n[design]\npanels = [{n}, {n}]\n'
-                                'layout = "zigzag_i"\n')
-                problem, options = load_design(path)
+            problem, options = from_config({"target": {"name": name},
+                                            "design": {"panels": [n, n], "layout": "zigzag_i"}})
         stats = problem.solve(replace(options, stop_rms=None)).stats
     finally:
         reduced.Manifold.point = point
