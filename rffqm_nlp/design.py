@@ -747,10 +747,11 @@ MEMORY_SEQUENTIAL_BUILD = 700e6
 #: residuals' Jacobian reads the target lattice; fitted to the peaks in docs/solvers.md) ...
 MEMORY_FREE_PER_PANEL = 3.5e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
-#: WORKING_SET * (P Q) ** WORKING_SET_POWER rows of the marched unknowns (the rows a later
-#: level still needs, :class:`rffqm_nlp.reduced._Window`; fitted to 20 to 100 panels a side)
-#: by the 3 (P + Q) design variables, 8 bytes each ...
-WORKING_SET, WORKING_SET_POWER = 17.6, 0.705
+#: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs,
+#: :class:`rffqm_nlp.reduced._Window`, 18.2 to 18.7 (P + Q) measured from 24 to 200 panels
+#: a side, and the identity over the 3 (P + Q) design variables) by those design
+#: variables, 8 bytes each ...
+WORKING_SET = 22
 #: ... and its dense design x design matrices held at once (J'J, the metric, the secant
 #: term, the damped matrix and its factor, the last iteration's, the step QP's copy):
 #: counted in reduced.py, not fitted.
@@ -762,7 +763,7 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     measurements, see :data:`MEMORY_PER_PANEL`; a multistart solves one start at a time).
 
     For P x Q panels: Levenberg-Marquardt needs memory.BASE + MEMORY_PER_PANEL * P Q + 8 *
-    WORKING_SET * (P Q) ** WORKING_SET_POWER * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
+    WORKING_SET * (P + Q) * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
     n_d = 3 (P + Q) design variables, and with a free correspondence
     (:class:`rffqm_nlp.transcription.Correspondence`) MEMORY_FREE_PER_PANEL * P Q more and
     its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2) in n_d; IPOPT needs
@@ -777,7 +778,7 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
             k = transcription.GRID_CONTROLS
             design += 2.0 * min(k, P / 2 + 1) * min(k, Q / 2 + 1)
             per_panel += MEMORY_FREE_PER_PANEL
-        working_set = 8.0 * WORKING_SET * (P * Q) ** WORKING_SET_POWER * design
+        working_set = 8.0 * WORKING_SET * (P + Q) * design
         need = (memory.BASE + per_panel * P * Q + working_set
                 + 8.0 * DESIGN_MATRICES * design ** 2)
     else:

@@ -819,9 +819,10 @@ class Manifold:
 
     def _levels(self, off: sp.csr_matrix) -> np.ndarray:
         """The level of each marching equation (n_eq,): 0 for one that uses no other
-        equation's unknown, else one more than the highest level among those it uses.
-        ``off``: the equations x state Jacobian pattern without each equation's own unknown.
-        Kahn's topological order, one frontier (a level) at a time."""
+        equation's unknown, else one more than the highest level among those it uses
+        (Kahn's topological order, one frontier at a time), then the chains postponed
+        (:func:`_postponed`). ``off``: the equations x state Jacobian pattern without each
+        equation's own unknown."""
         owner = np.empty(off.shape[1], dtype=np.int64)
         owner[self.match] = np.arange(off.shape[0])
         deps = sp.csr_matrix((np.ones(off.nnz), owner[off.indices], off.indptr),
@@ -833,15 +834,12 @@ class Manifold:
         frontier, k = np.flatnonzero(waiting == 0), 0
         while frontier.size:
             level[frontier] = k
-            starts, counts = users.indptr[frontier], np.diff(users.indptr)[frontier]
-            ends = np.cumsum(counts)
-            used = users.indices[np.repeat(starts - ends + counts, counts)
-                                 + np.arange(ends[-1] if ends.size else 0)]
+            used = _gathered(users, frontier)[0]
             np.subtract.at(waiting, used, 1)
             frontier, k = np.unique(used[waiting[used] == 0]), k + 1
         if np.any(level < 0):
             raise RuntimeError("the marching equations are cyclic in the state")
-        return level
+        return _postponed(level, deps, users)
 
     # ---------------------------------------------------------------- evaluation
     def point(self, x: np.ndarray) -> _Point | None:
@@ -892,6 +890,42 @@ class Manifold:
         nlp = self.nlp
         return float(max(0.0, np.max(nlp.lbg - p.g), np.max(p.g - nlp.ubg),
                          np.max(nlp.lbx - p.x), np.max(p.x - nlp.ubx)))
+
+
+def _gathered(csr: sp.csr_matrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The column indices of ``rows`` of ``csr`` one after the other, and where each row's
+    run starts in them (rows.size,)."""
+    starts, counts = csr.indptr[rows], np.diff(csr.indptr)[rows]
+    ends = np.cumsum(counts)
+    return (csr.indices[np.repeat(starts - ends + counts, counts)
+                        + np.arange(ends[-1] if ends.size else 0)], ends - counts)
+
+
+def _postponed(level: np.ndarray, deps: sp.csr_matrix, users: sp.csr_matrix) -> np.ndarray:
+    """The levels (n_eq,) with every chain equation moved to just below its earliest user:
+    an equation is a chain's when it uses at most one other equation's unknown, itself a
+    chain's (a chain from the design alone). Such a chain's earliest level can lie far
+    below the levels that read it, and its rows of S would wait that long in the pass's
+    working set (:class:`_Window`): the lifted fold multiplier angles PHI of a column
+    follow from the bottom edge, at levels 0 to N, while the vertices that read them come
+    at about i + j. Postponing an equation with more inputs would hold those instead (the
+    partial means of the sides, each over many). ``deps`` and ``users`` (n_eq x n_eq): the
+    other equations each equation uses, and those that use it."""
+    inputs = np.diff(deps.indptr)
+    chain = inputs == 0
+    by_level = np.argsort(level, kind="stable")
+    bounds = np.searchsorted(level[by_level], np.arange(level.max() + 2))
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        one = by_level[lo:hi][inputs[by_level[lo:hi]] == 1]
+        chain[one] = chain[deps.indices[deps.indptr[one]]]
+    late = level.copy()
+    for lo, hi in zip(bounds[-2::-1], bounds[:0:-1]):
+        moved = by_level[lo:hi]
+        moved = moved[chain[moved] & (np.diff(users.indptr)[moved] > 0)]
+        if moved.size:
+            used, starts = _gathered(users, moved)
+            late[moved] = np.minimum.reduceat(late[used], starts) - 1
+    return late
 
 
 @dataclass

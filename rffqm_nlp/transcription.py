@@ -635,8 +635,9 @@ class _Layout:
 
 class _MeanTree:
     """The mean of K sides as a tree of partial means: level 1 averages blocks of
-    ``branching`` consecutive sides, each further level blocks of the level below, up to one
-    root, the mean. Every node is a variable and every tree equation is local.
+    ``branching`` consecutive sides in the order ``order`` (a permutation of range(K),
+    default as given), each further level blocks of the level below, up to one root, the
+    mean. Every node is a variable and every tree equation is local.
 
     One equation sum(s) = K * mean would be a dense row of the constraint Jacobian, and the
     mean a dense column (it enters every side constraint); CasADi colours Jacobians in one
@@ -646,11 +647,15 @@ class _MeanTree:
     (docs/solvers.md).
     """
 
-    def __init__(self, K: int, branching: int = 16):
+    def __init__(self, K: int, branching: int = 16, order: np.ndarray | None = None):
         self.levels: list[ca.DM] = []  # weights: node = sum of weight * child
         weight = np.ones(K)  # sides under each node of the level below
+        rank = np.arange(K)
+        if order is not None:
+            rank[order] = np.arange(K)
         while weight.size > 1:
-            parent = np.arange(weight.size) // branching
+            parent = rank // branching
+            rank = np.arange(parent.max() + 1)
             size = np.bincount(parent, weights=weight)
             self.levels.append(ca.DM.triplet(parent.tolist(), list(range(weight.size)),
                                              (weight / size[parent]).tolist(),
@@ -675,6 +680,16 @@ class _MeanTree:
             below = ca.mtimes(W, below)
             out.append(below)
         return ca.vertcat(*out)
+
+
+def _sides_by_antidiagonal(N: int, M: int) -> np.ndarray:
+    """The sides [vec(LH); vec(LV)] (column-major, K = (N+1) M + N (M+1)) ordered by the
+    anti-diagonal i + j of their first vertex (i, j), then i: the march reaches them in
+    that order, so that a partial mean of :class:`_MeanTree` waits for sides of about one
+    anti-diagonal only (the Levenberg-Marquardt pass holds fewer rows, :mod:`reduced`)."""
+    i = np.concatenate([np.tile(np.arange(N + 1), M), np.tile(np.arange(N), M + 1)])
+    j = np.concatenate([np.repeat(np.arange(M), N + 1), np.repeat(np.arange(M + 1), N)])
+    return np.lexsort((i, i + j))
 
 
 def _fold_multipliers_kv(sigma: np.ndarray):
@@ -770,7 +785,7 @@ def simultaneous(setup: Setup) -> NLP:
     bd0 = setup.boundary
     N, M = bd0.N, bd0.M
     n1, m1 = N + 1, M + 1
-    tree = _MeanTree(n1 * M + N * m1)
+    tree = _MeanTree(n1 * M + N * m1, order=_sides_by_antidiagonal(N, M))
     corr = setup.correspondence
     grid_blocks = {} if corr is None else {"U": corr.shape, "V": corr.shape}
     lay = _Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),

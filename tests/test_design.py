@@ -180,9 +180,11 @@ def test_gauss_newton_hands_over_to_the_exact_hessian_unless_it_is_done():
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.integers(2, 3000), st.integers(2, 20), st.randoms(use_true_random=False))
-def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd):
-    tree = transcription._MeanTree(K, branching)
+@given(st.integers(2, 3000), st.integers(2, 20), st.randoms(use_true_random=False),
+       st.booleans())
+def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd, shuffled):
+    order = np.array(rnd.sample(range(K), K)) if shuffled else None
+    tree = transcription._MeanTree(K, branching, order)
     sides = np.array([rnd.uniform(0.1, 10) for _ in range(K)])
     s, P = ca.MX.sym("s", K), ca.MX.sym("P", tree.size)
     nodes = ca.Function("nodes", [s], [tree.expression(s)])(sides).full().ravel()
@@ -194,6 +196,21 @@ def test_mean_tree_root_is_the_mean_and_every_row_is_local(K, branching, rnd):
     jac = ca.jacobian_sparsity(res, ca.vertcat(s, P))
     rows = np.diff(np.array(jac.T.colind()))  # entries per residual row
     assert rows.max(initial=0) <= branching + 1
+    if order is not None:  # level 1 averages the sides in blocks of that order
+        first = tree.levels[0].sparse().tocoo()
+        np.testing.assert_array_equal(first.row[np.argsort(first.col)],
+                                      np.argsort(order) // branching)
+
+
+@pytest.mark.parametrize("N, M", [(1, 1), (3, 5), (6, 2)])
+def test_sides_by_antidiagonal_is_a_permutation_by_first_vertex(N, M):
+    order = transcription._sides_by_antidiagonal(N, M)
+    i = np.concatenate([np.arange(N + 1)[:, None].repeat(M, 1).ravel("F"),
+                        np.arange(N)[:, None].repeat(M + 1, 1).ravel("F")])
+    j = np.concatenate([np.arange(M)[None, :].repeat(N + 1, 0).ravel("F"),
+                        np.arange(M + 1)[None, :].repeat(N, 0).ravel("F")])
+    np.testing.assert_array_equal(np.sort(order), np.arange((N + 1) * M + N * (M + 1)))
+    assert np.all(np.diff((i + j)[order]) >= 0)
 
 
 def test_forced_failure_raises_solver_failed_with_status():

@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 import scipy.linalg as la
+import scipy.sparse as sp
 from hypothesis import given, settings, strategies as st
 from threadpoolctl import threadpool_info, threadpool_limits
 
@@ -56,6 +57,46 @@ def test_marching_equations_are_ordered_in_levels(manifold):
     own = C.tocoo()
     own_value = Gx[own.data[own.col == man.match[own.row]].astype(int) - 1]
     assert np.abs(own_value).min() > 1e-3
+
+
+@settings(max_examples=50, deadline=None)
+@given(n=st.integers(2, 40), data=st.data())
+def test_postponed_chains_sit_just_below_their_earliest_user(n, data):
+    """On a random DAG of equations (each uses a few earlier ones): the postponed levels
+    stay a valid order with no more levels; a chain equation (at most one input, itself a
+    chain's) sits one level below its earliest user, every other keeps its earliest level."""
+    deps = [sorted(data.draw(st.sets(st.integers(0, e - 1), max_size=min(e, 3))))
+            if e else [] for e in range(n)]
+    rows = np.repeat(np.arange(n), [len(d) for d in deps])
+    cols = np.array([u for d in deps for u in d], dtype=int)
+    D = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
+    level = np.zeros(n, dtype=int)
+    for e in range(n):
+        level[e] = 1 + max((level[u] for u in deps[e]), default=-1)
+    late = reduced._postponed(level, D, D.T.tocsr())
+    users = [[e for e in range(n) if u in deps[e]] for u in range(n)]
+    chain = np.zeros(n, dtype=bool)
+    for e in range(n):
+        chain[e] = len(deps[e]) == 0 or (len(deps[e]) == 1 and chain[deps[e][0]])
+    assert late.max() == level.max()
+    for e in range(n):
+        assert all(late[u] < late[e] for u in deps[e])
+        if chain[e] and users[e]:
+            assert late[e] == min(late[u] for u in users[e]) - 1
+        else:
+            assert late[e] == level[e]
+
+
+def test_the_working_set_grows_like_the_side_of_the_pattern(monkeypatch):
+    """The rows of S the pass holds at once grow like N + M, not like the pattern: the
+    chains (the lifted fold multiplier angles) wait just below the level that reads them,
+    and the partial means of the sides group sides of neighbouring anti-diagonals."""
+    monkeypatch.setattr(reduced, "WHOLE_S", 0)
+    pool = {}
+    for n in (10, 20):
+        prob, _ = small("sphere_cap", panels=(n, n))
+        pool[n] = reduced.Manifold(prob.transcribe())._window.pool
+    assert pool[20] <= 2.1 * pool[10]
 
 
 @settings(max_examples=5, deadline=None)
