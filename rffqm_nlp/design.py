@@ -740,12 +740,12 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
 #: (:data:`rffqm_nlp.memory.BASE`) plus this per panel for each path ("sequential",
 #: "simultaneous": IPOPT's transcriptions with MUMPS' factor; "levenberg-marquardt": the
 #: NLP, its Jacobians from stencils and their blocks by level) ...
-MEMORY_PER_PANEL = {"levenberg-marquardt": 25e3, "simultaneous": 190e3, "sequential": 250e3}
+MEMORY_PER_PANEL = {"levenberg-marquardt": 18.5e3, "simultaneous": 190e3, "sequential": 250e3}
 #: ... the sequential NLP's derivative build on top ...
 MEMORY_SEQUENTIAL_BUILD = 700e6
 #: ... for Levenberg-Marquardt with a free correspondence this per panel more (the
 #: residuals' Jacobian reads the target lattice; fitted to the peaks in docs/solvers.md) ...
-MEMORY_FREE_PER_PANEL = 3.5e3
+MEMORY_FREE_PER_PANEL = 1e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs,
 #: :class:`rffqm_nlp.reduced._Window`, 18.2 to 18.7 (P + Q) measured from 24 to 200 panels

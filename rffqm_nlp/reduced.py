@@ -90,6 +90,12 @@ BLOCK = 1 << 24
 #: entries (state x marching design) of S up to which the pass keeps it whole (8 MB, which
 #: stays in the cache: its products are then cheaper than the sweeps; docs/solvers.md)
 WHOLE_S = 1 << 20
+#: rows of W scaled at once when it is refilled (:meth:`_Levels.refill`; a temporary
+#: as long as their nonzeros instead of three as long as all of W's)
+REFILL_ROWS = 1 << 16
+#: rows of a level computed at once in the pass (:class:`_Window`): their product with
+#: the working set, CHUNK_ROWS x n_d, is the pass's largest temporary
+CHUNK_ROWS = 1024
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`), and of one
 #: band's range of columns of them
 GRAM_ROWS = 1024
@@ -214,9 +220,9 @@ class _Sliced:
         self._index = self.matrix.data.astype(np.int64) - 1
 
     def __call__(self, nonzeros: np.ndarray) -> sp.spmatrix:
-        m = self.matrix.copy()
-        m.data = nonzeros[self._index]
-        return m
+        """The block with the values ``nonzeros`` (its structure shared, not copied)."""
+        m = self.matrix
+        return type(m)((nonzeros[self._index], m.indices, m.indptr), shape=m.shape)
 
 
 class _Levels:
@@ -245,7 +251,7 @@ class _Levels:
         self.bounds = bounds
         self.blocks = [self.block(lo, hi, W.indices[W.indptr[lo]:W.indptr[hi]], self.n_d + lo)
                        for lo, hi in bounds]
-        self._transposed()
+        self._compressed()
 
     def block(self, lo: int, hi: int, columns: np.ndarray, width: int) -> sp.csr_matrix:
         """W_k of the level lo:hi with its nonzeros' columns given (same order as W's) and
@@ -256,29 +262,19 @@ class _Levels:
         block.data = self.data[start:stop]  # a view (the constructor may have copied)
         return block
 
-    def _transposed(self) -> None:
-        """W_k' restricted to the columns W_k uses, for :meth:`adjoint` (a transposed block
-        over all earlier columns would cost a pass over the whole state per level): per
-        level (used columns, W_k' (their number, rows)), the data views of one array
-        refilled as ``data[_tperm]``."""
-        W, perm, parts = self.W, [], []
+    def _compressed(self) -> None:
+        """Per level (the columns W_k uses, W_k' over those columns alone: CSC, the
+        transpose of W_k's rows with their columns renumbered), for :meth:`adjoint`: W_k'
+        applied to a level is then a product over the columns it reaches, where W_k' over
+        all earlier columns would cost a pass over the whole state per level. Their data
+        are views of the shared array, as the blocks', so no transposed copy is kept."""
+        W, self.compressed = self.W, []
         for lo, hi in self.bounds:
             start, stop = W.indptr[lo], W.indptr[hi]
-            row = np.repeat(np.arange(hi - lo), np.diff(W.indptr[lo:hi + 1]))
             columns, used = np.unique(W.indices[start:stop], return_inverse=True)
-            order = np.lexsort((row, used))
-            perm.append(start + order)
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(used, minlength=columns.size))])
-            parts.append((columns, row[order], indptr, hi - lo))
-        self._tperm = index_array(np.concatenate(perm) if perm else np.zeros(0))
-        self._tdata = np.zeros(self._tperm.size)
-        self.transposed, k = [], 0
-        for columns, row, indptr, rows in parts:
-            T = sp.csr_matrix((self._tdata[k:k + row.size], row, indptr),
-                              shape=(columns.size, rows))
-            T.data = self._tdata[k:k + row.size]  # a view, refilled with the array
-            self.transposed.append((columns, T))
-            k += row.size
+            T = self.block(lo, hi, index_array(used), columns.size).T
+            T.data = self.data[start:stop]  # a view (the transpose may have copied)
+            self.compressed.append((columns, T))
 
     def refill(self, G: np.ndarray) -> bool:
         """W at G's nonzeros (the constraints' Jacobian); False where an equation's own
@@ -286,8 +282,11 @@ class _Levels:
         diagonal = G[self._diagonal]
         if np.any(diagonal == 0):
             return False
-        self.data[:] = G[self._index] * np.repeat(-1.0 / diagonal, self._counts)
-        self._tdata[:] = self.data[self._tperm]
+        np.take(G, self._index, out=self.data, mode="clip")  # "raise" would buffer a copy
+        scale, indptr = -1.0 / diagonal, self.W.indptr
+        for lo in range(0, scale.size, REFILL_ROWS):  # W's rows scaled a block at a time
+            hi = min(scale.size, lo + REFILL_ROWS)
+            self.data[indptr[lo]:indptr[hi]] *= np.repeat(scale[lo:hi], self._counts[lo:hi])
         return True
 
     def forward(self, X: np.ndarray) -> np.ndarray:
@@ -302,7 +301,7 @@ class _Levels:
         """S' Y (n_d,) or (n_d, p) for Y (n_s,) or (n_s, p): the sweep backwards."""
         Z = np.zeros((self.n_d + self.n_s,) + Y.shape[1:])
         Z[self.n_d:] = Y
-        for (lo, hi), (columns, T) in zip(reversed(self.bounds), reversed(self.transposed)):
+        for (lo, hi), (columns, T) in zip(reversed(self.bounds), reversed(self.compressed)):
             Z[columns] += T @ Z[self.n_d + lo:self.n_d + hi]
         return Z[:self.n_d]
 
@@ -407,8 +406,6 @@ class _Window:
         free_column[self.free] = np.arange(self.free.size)
         width = n_m + self.pool
         self._slot = slot
-        self._blocks = [levels.block(lo, hi, column[W.indices[W.indptr[lo]:W.indptr[hi]]], width)
-                        for lo, hi in levels.bounds]
         span = self._spans(levels, column)
         edges = _bands(n_m)
         # residual rows by level, in the order of their bands: (rows, their part in the
@@ -443,17 +440,26 @@ class _Window:
         counts = [int(is_pattern[lo:hi].sum()) for lo, hi in levels.bounds]
         if any(not is_pattern[lo:lo + k].all() for (lo, _), k in zip(levels.bounds, counts)):
             raise RuntimeError("the metric's rows of a level do not come first")
-        # per level: the order of its first rows, the metric's, by band (None: as they are),
-        # their roots of D in that order (k, 1) and their segments (a, b, start, stop)
-        self._pattern = []
-        for (lo, _), k in zip(levels.bounds, counts):
-            band = self._band(span[0][lo:lo + k], span[1][lo:lo + k], edges)
-            perm = np.argsort(band, kind="stable")
-            if np.array_equal(perm, np.arange(k)):
-                perm = None
-            mine = np.arange(lo, lo + k) if perm is None else lo + perm
-            self._pattern.append((k, perm, root[mine, None],
-                                  self._segments(span[0][mine], span[1][mine], edges)))
+        # per level, its chunks of at most CHUNK_ROWS rows: (lo, hi, W_k's rows lo:hi in the
+        # pool's columns, the metric's rows among them: their number k (the first k), their
+        # order by band (None: as they are), their roots of D in that order (k, 1) and
+        # their segments (a, b, start, stop))
+        self._chunks = []
+        for (lo, hi), count in zip(levels.bounds, counts):
+            chunks = []
+            for a in range(lo, hi, CHUNK_ROWS):
+                b = min(hi, a + CHUNK_ROWS)
+                k = max(0, min(b, lo + count) - a)
+                band = self._band(span[0][a:a + k], span[1][a:a + k], edges)
+                perm = np.argsort(band, kind="stable")
+                if np.array_equal(perm, np.arange(k)):
+                    perm = None
+                mine = np.arange(a, a + k) if perm is None else a + perm
+                chunks.append((a, b, levels.block(a, b, column[W.indices[W.indptr[a]:
+                                                                         W.indptr[b]]], width),
+                               k, perm, root[mine, None],
+                               self._segments(span[0][mine], span[1][mine], edges)))
+            self._chunks.append(chunks)
 
     def _spans(self, levels: _Levels, column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The first and last pool column (each (n_s,)) in which each state row of S can be
@@ -565,14 +571,14 @@ class _Window:
             Jf[self._lifted_rows] += lift.product()
         sums = _Sums(n_m, self.mid, Jf, r)
         self._reduce(-1, pool, sums)
-        for k, ((lo, hi), W, (mine, perm, root, segments)) in enumerate(
-                zip(self.levels.bounds, self._blocks, self._pattern)):
-            S = W @ pool
-            pool[n_m + self._slot[lo:hi]] = S
-            if metric and mine:
-                rows = S[:mine] if perm is None else S[perm]
-                for a, b, start, stop in segments:
-                    sums.metric.add(a, b, rows[start:stop, a:b], scale=root[start:stop])
+        for k, chunks in enumerate(self._chunks):
+            for lo, hi, W, mine, perm, root, segments in chunks:
+                S = W @ pool
+                pool[n_m + self._slot[lo:hi]] = S
+                if metric and mine:
+                    rows = S[:mine] if perm is None else S[perm]
+                    for a, b, start, stop in segments:
+                        sums.metric.add(a, b, rows[start:stop, a:b], scale=root[start:stop])
             self._reduce(k, pool, sums)
         out = sums.total(self.marching, self.free, metric)
         if not all(a is None or np.all(np.isfinite(a)) for a in out):
@@ -626,9 +632,9 @@ class _Sums:
                                                                                - mid)])
         gram = self.jacobian.total()
         n = order.size
-        JtJ, grad = np.zeros((n, n)), np.zeros(n)
-        JtJ[np.ix_(order, order)] = gram[np.ix_(keep, keep)]
-        grad[order] = gram[keep, mid + n_f]
+        source = keep[np.argsort(order)]  # the Gram's row of each design variable
+        JtJ, grad = gram[np.ix_(source, source)], gram[source, mid + n_f]
+        del gram
         if not metric:
             return JtJ, grad, None
         M = np.zeros((n, n))
@@ -675,11 +681,13 @@ class _Gram:
         entry[1] = used + k
 
     def total(self) -> np.ndarray:
-        """The symmetric sum (n, n)."""
+        """The symmetric sum (n, n), made in place of the upper triangle (whose lower one
+        the syrks leave zero), and handed over: the Gram is spent."""
         for a, b in self._buffers:
             self._flush(a, b)
-        upper = self._upper
-        return np.triu(upper) + np.triu(upper, 1).T
+        upper, self._upper, self._buffers = self._upper, None, {}
+        upper += np.triu(upper, 1).T
+        return upper
 
     def _flush(self, a: int, b: int) -> None:
         entry = self._buffers[(a, b)]
@@ -861,11 +869,13 @@ class Manifold:
             return None
         if not self._sweeps.refill(G):
             return None
+        G_design, G_state = self._G_design(G), self._G_state(G)
+        del G  # all of g's nonzeros, not held through the pass
         reduced = self._window(J, p.r, lift, metric)
         if reduced is None:
             return None
         return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
-                              G_design=self._G_design(G), G_state=self._G_state(G),
+                              G_design=G_design, G_state=G_state,
                               sensitivity=_Sensitivity(self._sweeps, reduced[3],
                                                        self._window.marching),
                               JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],

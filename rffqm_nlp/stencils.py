@@ -52,12 +52,13 @@ class Stencil:
 
 def stencil(function: ca.Function, columns: np.ndarray, rows: np.ndarray,
             params: np.ndarray | None = None) -> Stencil:
-    """A :class:`Stencil` with its index arrays as int64 (n, k) and (n, m) and its params
+    """A :class:`Stencil` with its index arrays (n, k) and (n, m) as :func:`index_array`
+    makes them (int32 where they fit: they are kept as long as the Jacobian) and its params
     as float (n, p) (none: p = 0)."""
-    columns = np.asarray(columns, dtype=np.int64)
+    columns = index_array(np.asarray(columns, dtype=np.int64))
     n = columns.shape[0]
     params = np.zeros((n, 0)) if params is None else np.asarray(params, dtype=float)
-    return Stencil(function, columns, np.asarray(rows, dtype=np.int64),
+    return Stencil(function, columns, index_array(np.asarray(rows, dtype=np.int64)),
                    np.ascontiguousarray(params.reshape(n, -1)))
 
 
@@ -91,7 +92,7 @@ class Constant:
 
 class _Mapped:
     """One stencil's Jacobian, mapped over its instances, evaluated into ``out`` (its
-    nonzeros, instance by instance)."""
+    ``size`` nonzeros, instance by instance; an array :meth:`bind` gives)."""
 
     def __init__(self, s: Stencil):
         f = s.function
@@ -107,8 +108,15 @@ class _Mapped:
         self._buffer, self._eval = jac.map(n).buffer()
         self._buffer.set_arg(0, memoryview(self._z))
         self._buffer.set_arg(1, memoryview(self._p))
-        self.out = np.zeros(n * len(row))
-        self._buffer.set_res(0, memoryview(self.out))
+        self.size = n * len(row)
+        self.out = np.zeros(0)
+
+    def bind(self, out: np.ndarray) -> None:
+        """Evaluate into ``out`` ((size,), contiguous) from now on."""
+        if out.shape != (self.size,) or not out.flags.c_contiguous:
+            raise ValueError(f"{self.size} contiguous nonzeros expected, got {out.shape}")
+        self.out = out
+        self._buffer.set_res(0, memoryview(out))
 
     def entries(self) -> tuple[np.ndarray, np.ndarray]:
         """The rows and columns in g and x of the nonzeros of ``out`` (each (n nnz,),
@@ -117,7 +125,7 @@ class _Mapped:
         return self._stencil.rows[:, row].ravel(), self._stencil.columns[:, col].ravel()
 
     def __call__(self, x: np.ndarray) -> None:
-        np.take(x, self._index, out=self._z)
+        np.take(x, self._index, out=self._z, mode="clip")  # "raise" would buffer a copy
         self._eval()
 
 
@@ -149,33 +157,58 @@ class LocalJacobian:
                                  + [np.unique(c.rows) for c in self.constants])
         if covered.size != n_g or not np.array_equal(np.sort(covered), np.arange(n_g)):
             raise RuntimeError("the stencils do not cover each constraint row once")
+        # every stencil's nonzeros, then the constant ones, in one array: the weights of
+        # the scatter at each point, with no copy
         mapped = [_Mapped(s) for s in self.stencils]
-        self._constant = np.concatenate([c.values for c in self.constants] + [np.zeros(0)])
+        constant = np.concatenate([c.values for c in self.constants] + [np.zeros(0)])
+        ends = np.cumsum([0] + [m.size for m in mapped])
+        self._values = np.zeros(ends[-1] + constant.size)
+        self._values[ends[-1]:] = constant
+        for m, start, stop in zip(mapped, ends[:-1], ends[1:]):
+            m.bind(self._values[start:stop])
         entries = [m.entries() for m in mapped] + [(c.rows, c.columns) for c in self.constants]
-        key = np.concatenate([cols * n_g + rows for rows, cols in entries])
+        key = np.concatenate([cols.astype(np.int64) * n_g + rows for rows, cols in entries])
         del entries
         key, position = np.unique(key, return_inverse=True)
         self._position = index_array(position)  # as long as the instances' nonzeros
         del position
-        col, row = np.divmod(key, n_g)
-        self._pattern = sp.csc_matrix((np.arange(1, key.size + 1, dtype=float), (row, col)),
-                                      shape=self.shape)
-        self._pattern.sort_indices()
+        col, row = np.divmod(key, n_g)  # key is sorted: the CSC order
+        self._structure = _Structure(index_array(row), np.searchsorted(
+            col, np.arange(self.shape[1] + 1)), self.shape)
         self._mapped = mapped
         return mapped
 
     def pattern(self) -> sp.csc_matrix:
         """The sparsity, data = 1 + the index of each nonzero."""
         self._build()
-        return self._pattern.copy()
+        return self._structure.pattern()
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The nonzeros (nnz,) at x (n_x,)."""
         mapped = self._build()
         for m in mapped:
             m(x)
-        values = np.concatenate([m.out for m in mapped] + [self._constant])
-        return np.bincount(self._position, weights=values, minlength=self._pattern.nnz)
+        return np.bincount(self._position, weights=self._values,
+                           minlength=self._structure.nnz)
+
+
+@dataclass(frozen=True)
+class _Structure:
+    """A CSC sparsity (``indices``, ``indptr``, ``shape``) kept without its values: a
+    large Jacobian's pattern as :meth:`pattern` gives it costs 8 bytes a nonzero more."""
+
+    indices: np.ndarray
+    indptr: np.ndarray
+    shape: tuple[int, int]
+
+    @property
+    def nnz(self) -> int:
+        return self.indices.size
+
+    def pattern(self) -> sp.csc_matrix:
+        """The sparsity (a new matrix), data = 1 + the index of each nonzero."""
+        return sp.csc_matrix((np.arange(1, self.nnz + 1, dtype=float), self.indices.copy(),
+                              self.indptr.copy()), shape=self.shape)
 
 
 @dataclass(frozen=True)
@@ -233,21 +266,20 @@ class LiftedJacobian:
         F = self.inner.pattern()  # data = 1 + the index in the inner Jacobian's nonzeros
         Fx = F[:, :n_x].tocsc()
         Fx.sort_indices()
-        self._x_index = Fx.data.astype(np.int64) - 1
-        Fx.data = np.arange(1, Fx.nnz + 1, dtype=float)
-        self._pattern = Fx
+        self._x_index = index_array(Fx.data - 1)
+        self._structure = _Structure(Fx.indices, Fx.indptr, Fx.shape)
         Fu = F[:, n_x:].tocsr()
         self._lifted_rows = np.flatnonzero(np.diff(Fu.indptr))
         Fu = Fu[self._lifted_rows]
         Fu.sort_indices()
-        self._Fu_index = Fu.data.astype(np.int64) - 1
-        self._Fu = Fu
+        self._Fu_index = index_array(Fu.data - 1)
+        self._Fu = (Fu.indices, Fu.indptr, Fu.shape)  # F_u's structure, its values per point
         self._built = True
 
     def pattern(self) -> sp.csc_matrix:
         """F_x's sparsity (n_g x n_x), data = 1 + the index of each nonzero."""
         self._build()
-        return self._pattern.copy()
+        return self._structure.pattern()
 
     @property
     def rows(self) -> np.ndarray:
@@ -260,6 +292,6 @@ class LiftedJacobian:
         self._build()
         u, H = self._lift(x)
         values = self.inner(np.concatenate([x, u]))
-        Fu = sp.csr_matrix((values[self._Fu_index], self._Fu.indices, self._Fu.indptr),
-                           shape=self._Fu.shape)  # the pattern's structure, new values
+        indices, indptr, shape = self._Fu
+        Fu = sp.csr_matrix((values[self._Fu_index], indices, indptr), shape=shape)
         return values[self._x_index], Lift(self._lifted_rows, Fu, H, self.columns)

@@ -143,16 +143,22 @@ def test_the_level_pass_and_the_sweeps_match_the_dense_sensitivity(manifold, see
     _assert_level_pass_matches_dense(man, seed)
 
 
-@pytest.mark.parametrize("whole", [True, False])
-def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity(monkeypatch, whole):
+@pytest.mark.parametrize("whole, chunk", [(True, None), (False, None), (False, 7)])
+def test_the_level_pass_without_a_lift_matches_the_dense_sensitivity(monkeypatch, whole,
+                                                                     chunk):
     """The same in the lattice mode: every design column in the pool; with S kept whole
-    (the default at this size) and with the working set alone."""
+    (the default at this size), with the working set alone, and with each level's rows
+    computed a few at a time (``chunk``; by default, at this size, all at once)."""
     if not whole:
         monkeypatch.setattr(reduced, "WHOLE_S", 0)
+    if chunk is not None:
+        monkeypatch.setattr(reduced, "CHUNK_ROWS", chunk)
     prob, _ = small("sphere_cap", correspondence="lattice")
     man = reduced.Manifold(prob.transcribe())
     assert man._window.free.size == 0
     assert man._window.whole == whole
+    chunks = [len(level) for level in man._window._chunks]
+    assert (max(chunks) > 1) == (chunk is not None)
     for seed in (0, 1):
         _assert_level_pass_matches_dense(man, seed)
 
