@@ -748,9 +748,8 @@ MEMORY_SEQUENTIAL_BUILD = 700e6
 MEMORY_FREE_PER_PANEL = 1e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs,
-#: :class:`rffqm_nlp.reduced._Window`, 18.2 to 18.7 (P + Q) measured from 24 to 200 panels
-#: a side, and the identity over the 3 (P + Q) design variables) by those design
-#: variables, 8 bytes each ...
+#: :class:`rffqm_nlp.reduced._Window`, as measured in docs/solvers.md, and the identity
+#: over the 3 (P + Q) design variables) by those design variables, 8 bytes each ...
 WORKING_SET = 22
 #: ... and its dense design x design matrices held at once (J'J, the metric, the secant
 #: term, the damped matrix and its factor, the last iteration's, the step QP's copy):

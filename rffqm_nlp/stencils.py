@@ -12,7 +12,7 @@ stencils"). Rows whose derivatives are constant (linear rows) are given as tripl
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -194,21 +194,29 @@ class LocalJacobian:
 
 @dataclass(frozen=True)
 class _Structure:
-    """A CSC sparsity (``indices``, ``indptr``, ``shape``) kept without its values: a
-    large Jacobian's pattern as :meth:`pattern` gives it costs 8 bytes a nonzero more."""
+    """A CSC (or ``fmt`` "csr") sparsity (``indices``, ``indptr``, ``shape``) kept without
+    its values: a large Jacobian's pattern as :meth:`pattern` gives it costs 8 bytes a
+    nonzero more."""
 
     indices: np.ndarray
     indptr: np.ndarray
     shape: tuple[int, int]
+    fmt: str = "csc"
 
     @property
     def nnz(self) -> int:
         return self.indices.size
 
-    def pattern(self) -> sp.csc_matrix:
+    def with_values(self, data: np.ndarray) -> sp.spmatrix:
+        """The matrix of this sparsity with the values ``data`` (nnz,), sharing its index
+        arrays."""
+        kind = sp.csr_matrix if self.fmt == "csr" else sp.csc_matrix
+        return kind((data, self.indices, self.indptr), shape=self.shape)
+
+    def pattern(self) -> sp.spmatrix:
         """The sparsity (a new matrix), data = 1 + the index of each nonzero."""
-        return sp.csc_matrix((np.arange(1, self.nnz + 1, dtype=float), self.indices.copy(),
-                              self.indptr.copy()), shape=self.shape)
+        return replace(self, indices=self.indices.copy(), indptr=self.indptr.copy()
+                       ).with_values(np.arange(1, self.nnz + 1, dtype=float))
 
 
 @dataclass(frozen=True)
@@ -273,7 +281,7 @@ class LiftedJacobian:
         Fu = Fu[self._lifted_rows]
         Fu.sort_indices()
         self._Fu_index = index_array(Fu.data - 1)
-        self._Fu = (Fu.indices, Fu.indptr, Fu.shape)  # F_u's structure, its values per point
+        self._Fu = _Structure(Fu.indices, Fu.indptr, Fu.shape, "csr")  # values per point
         self._built = True
 
     def pattern(self) -> sp.csc_matrix:
@@ -292,6 +300,5 @@ class LiftedJacobian:
         self._build()
         u, H = self._lift(x)
         values = self.inner(np.concatenate([x, u]))
-        indices, indptr, shape = self._Fu
-        Fu = sp.csr_matrix((values[self._Fu_index], indices, indptr), shape=shape)
+        Fu = self._Fu.with_values(values[self._Fu_index])
         return values[self._x_index], Lift(self._lifted_rows, Fu, H, self.columns)
