@@ -61,6 +61,9 @@ COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
 #: Most iterations of the damped Gauss-Newton Hessian before the exact one takes over (see
 #: SolveOptions.ipopt_phases).
 GAUSS_NEWTON_ITERATIONS = 30
+#: SolveOptions.boundary_knots' default: knots per class of boundary data of the coarse
+#: basis in which Levenberg-Marquardt starts (docs/solvers.md)
+BOUNDARY_KNOTS = 32
 #: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
 #: does it after stop_rms is reached).
 HANDOVER_STOP_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
@@ -98,6 +101,7 @@ SOLVE_KEYS = {
         "scalar", hint="(IPOPT's yes/no options take 'yes' or 'no')")),
     "multistart": Key("whole", low=1),
     "seed": Key("whole", low=0),
+    "boundary_knots": Key("whole", low=0, hint="(0: the whole design from the start)"),
 }
 #: The tables of a design file as :func:`rffqm_nlp.files.check_table` checks them.
 FILE_KEYS = {name: Key("table") for name in TABLES}
@@ -159,7 +163,13 @@ class SolveOptions:
       the options are made. Options that a field above sets (:data:`IPOPT_FIELDS`) are
       refused;
     * ``multistart``: solve from this many starting Miuras and keep the best fit
-      (:func:`solve_multistart`); ``seed``: the seed of their perturbations.
+      (:func:`solve_multistart`); ``seed``: the seed of their perturbations;
+    * ``boundary_knots``: Levenberg-Marquardt steps first in a coarse basis of the boundary
+      data, each of its 12 classes (A, B at either edge, LV, LH; each parity) piecewise
+      linear between at most this many knots (:func:`rffqm_nlp.reduced.boundary_basis`),
+      then, unless ``stop_rms`` was reached there, in the whole design from its end; 0: the
+      whole design from the start. Patterns up to about 2 x ``boundary_knots`` panels a side
+      have no coarser basis.
     """
 
     solver: str = LM
@@ -175,6 +185,7 @@ class SolveOptions:
     ipopt_options: dict[str, str | int | float] = field(default_factory=dict)
     multistart: int = 1
     seed: int = 0
+    boundary_knots: int = BOUNDARY_KNOTS
 
     def __post_init__(self) -> None:
         values = check_table({f.name: getattr(self, f.name) for f in fields(self)},
@@ -184,6 +195,9 @@ class SolveOptions:
         if self.solver == LM and self.transcription != "simultaneous":
             raise InputError("[solve] solver 'levenberg-marquardt' marches the simultaneous "
                              "NLP's design; use transcription 'simultaneous'")
+        if self.boundary_knots == 1:
+            raise InputError("[solve] boundary_knots must be 0 (the whole design from the "
+                             "start) or at least 2 (knots a class), got 1")
         if self.solver == LM and not self.damping > 0:
             raise InputError("[solve] damping must be > 0 with solver 'levenberg-marquardt' "
                              f"(its first damping), got {self.damping:g}")
@@ -512,7 +526,7 @@ class DesignProblem:
         every step recorded; None when x is not an admissible start (no step taken)."""
         deadline = None if options.time_limit is None else record.t0 + options.time_limit
         t1 = time.perf_counter()
-        manifold = reduced.Manifold(nlp)  # its derivatives' build, like IPOPT's
+        manifold = reduced.Manifold(nlp, options.boundary_knots or None)  # like IPOPT's build
         record.build_time += time.perf_counter() - t1
         out = reduced.levenberg_marquardt(
             nlp, x, options.damping, options.max_iter - record.iterations, deadline=deadline,
@@ -762,16 +776,22 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     measurements, see :data:`MEMORY_PER_PANEL`; a multistart solves one start at a time).
 
     For P x Q panels: Levenberg-Marquardt needs memory.BASE + MEMORY_PER_PANEL * P Q + 8 *
-    WORKING_SET * (P + Q) * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for
-    n_d = 3 (P + Q) design variables, and with a free correspondence
-    (:class:`rffqm_nlp.transcription.Correspondence`) MEMORY_FREE_PER_PANEL * P Q more and
-    its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2) in n_d; IPOPT needs
+    WORKING_SET * (P + Q) * n_d + 8 * DESIGN_MATRICES * n_d ** 2, for n_d = 3 (P + Q)
+    design variables, or with ``stop_rms`` and ``boundary_knots`` k the coarse basis'
+    6 (min(k, P / 2) + min(k, Q / 2)) coordinates (a run that does not reach stop_rms in
+    the coarse basis goes on in the whole design: then n_d's memory), and with a free
+    correspondence (:class:`rffqm_nlp.transcription.Correspondence`)
+    MEMORY_FREE_PER_PANEL * P Q more and its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2)
+    in n_d; IPOPT needs
     memory.BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
     the sequential transcription)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
     if options.solver == LM:
         design = 3.0 * (P + Q)
+        if options.stop_rms is not None and options.boundary_knots:
+            k = options.boundary_knots
+            design = min(design, 6.0 * (min(k, P / 2) + min(k, Q / 2)))
         per_panel = MEMORY_PER_PANEL[LM]
         if problem.correspondence == "free":
             k = transcription.GRID_CONTROLS

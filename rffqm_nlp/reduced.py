@@ -28,6 +28,12 @@ through the levels (S' applied to their state parts), and every row's change und
 from one forward sweep (S dd); where the pass kept S whole, from products with it
 (:class:`_Sensitivity`).
 
+The steps can be taken in a coarse basis of the design first, d = B u (n_u < n_d,
+:func:`boundary_basis`: each class of boundary data piecewise linear between a few knots),
+whose pass costs (n_u / n_d)^2 of the whole design's in its Gram matrices; where that run
+ends optimal in the basis or stalls, it goes on in the whole design
+(:func:`levenberg_marquardt`).
+
 Each iteration solves the damped, linearised problem
 
     min_dd 0.5 |r + J dd|^2 + 0.5 dd' B dd + 0.5 lam dd' M dd   s.t. the inequalities, linearised,
@@ -65,7 +71,7 @@ from __future__ import annotations
 import functools
 import time
 from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import casadi as ca
@@ -154,14 +160,15 @@ class _Point:
 
 @dataclass
 class _Linearization:
-    """The derivatives at a point: the sparse Jacobians of r and g split by design (n_d)
-    and state (n_s) columns (J_design, J_state; the inequality rows' G_design, G_state),
-    S = ds/dd there (``sensitivity``: applied to a block, and its transpose), and the
-    reduced problem's J' J, J' r and the metric's S_p' D_p S_p (n_d x n_d, n_d; the last
-    None when linearised without it), accumulated level by level (:class:`_Window`)
-    without storing S (unless it is small). With a lifted residual Jacobian
-    (:class:`rffqm_nlp.stencils.LiftedJacobian`), J_design holds its direct part and
-    ``lift`` the rest, F_u H, its columns numbered in the design.
+    """The derivatives at a point in the design's coordinates u (n_u, the manifold's
+    ``basis`` B maps them to the design, dd = B du): the sparse Jacobians of r and g split
+    by design and state (n_s) columns (J_design, J_state; the inequality rows' G_design,
+    G_state; the design columns times B), S B with S = ds/dd there (``sensitivity``:
+    applied to a block, and its transpose), and the reduced problem's J' J, J' r and the
+    metric's B' S_p' D_p S_p B (n_u x n_u, n_u; the last None when linearised without
+    it), accumulated level by level (:class:`_Window`) without storing S (unless it is
+    small). With a lifted residual Jacobian (:class:`rffqm_nlp.stencils.LiftedJacobian`),
+    J_design holds its direct part and ``lift`` the rest, F_u H, its columns numbered in u.
     Valid until the manifold linearises at the next point (the levels are refilled there)."""
 
     J_design: sp.csr_matrix
@@ -175,23 +182,23 @@ class _Linearization:
     lift: Lift | None
 
     def jacobian_times(self, X: np.ndarray) -> np.ndarray:
-        """Jr X (n_r,) or (n_r, p) for X (n_d,) or (n_d, p), Jr = J_design + J_state S (+
-        F_u H) the reduced Jacobian."""
+        """Jr X (n_r,) or (n_r, p) for X (n_u,) or (n_u, p), Jr = J_design + J_state S B
+        (+ F_u H) the reduced Jacobian."""
         out = self.J_design @ X + self.J_state @ self.sensitivity.forward(X)
         if self.lift is not None:
             out[self.lift.rows] += self.lift.times(X)
         return out
 
     def jacobian_transpose(self, w: np.ndarray) -> np.ndarray:
-        """Jr' w (n_d,) for w (n_r,)."""
+        """Jr' w (n_u,) for w (n_r,)."""
         out = self.J_design.T @ w + self.sensitivity.adjoint(self.J_state.T @ w)
         if self.lift is not None:
             out[self.lift.columns] += self.lift.transpose_times(w)
         return out
 
-    def state_change(self, dd: np.ndarray) -> np.ndarray:
-        """S dd (n_s,): the state's first-order change under the design change dd (n_d,)."""
-        return self.sensitivity.forward(dd)
+    def state_change(self, du: np.ndarray) -> np.ndarray:
+        """S B du (n_s,): the state's first-order change under the step du (n_u,)."""
+        return self.sensitivity.forward(du)
 
 
 class _Buffered:
@@ -308,33 +315,35 @@ class _Levels:
 
 @dataclass
 class _Sensitivity:
-    """S = ds/dd (n_s x n_d) at a point: by the sweeps through the ``levels``, or by
-    products with S itself where the pass kept it whole (``whole``, (n_s, n_m): its
-    marching columns ``marching``, (n_m,); S is zero in the other, free, columns)."""
+    """S B (n_s x n_u) at a point, S = ds/dd and B the design's ``basis`` (n_d x n_u): by
+    the sweeps through the ``levels``, or by products with S B itself where the pass kept
+    it whole (``whole``, (n_s, n_m): its marching columns ``marching``, (n_m,); S B is zero
+    in the other, free, columns)."""
 
     levels: _Levels
     whole: np.ndarray | None
     marching: np.ndarray
+    basis: sp.csr_matrix
 
     def forward(self, X: np.ndarray) -> np.ndarray:
-        """S X (n_s,) or (n_s, p) for X (n_d,) or (n_d, p)."""
+        """S B X (n_s,) or (n_s, p) for X (n_u,) or (n_u, p)."""
         if self.whole is None:
-            return self.levels.forward(X)
+            return self.levels.forward(self.basis @ X)
         return self.whole @ X[self.marching]
 
     def adjoint(self, Y: np.ndarray) -> np.ndarray:
-        """S' Y (n_d,) or (n_d, p) for Y (n_s,) or (n_s, p)."""
+        """B' S' Y (n_u,) or (n_u, p) for Y (n_s,) or (n_s, p)."""
         if self.whole is None:
-            return self.levels.adjoint(Y)
-        out = np.zeros((self.levels.n_d,) + Y.shape[1:])
+            return self.basis.T @ self.levels.adjoint(Y)
+        out = np.zeros((self.basis.shape[1],) + Y.shape[1:])
         out[self.marching] = self.whole.T @ Y
         return out
 
     def rows(self, R: sp.csr_matrix) -> np.ndarray:
-        """R S (k, n_d) for the state rows R (k, n_s)."""
+        """R S B (k, n_u) for the state rows R (k, n_s)."""
         if self.whole is None:
-            return self.levels.adjoint(R.T.toarray()).T
-        out = np.zeros((R.shape[0], self.levels.n_d))
+            return self.adjoint(R.T.toarray()).T
+        out = np.zeros((R.shape[0], self.basis.shape[1]))
         out[:, self.marching] = R @ self.whole
         return out
 
@@ -346,18 +355,20 @@ class _Window:
     Each state row gets a slot in a pool (``pool`` rows) from its level until the last
     level that uses it: the marching equations of a later level, or a residual row, which
     is reduced at the level of its latest state unknown (residual rows that use no state
-    come first). A slot freed is reused by a later level, except where S has at most
+    come first). A slot freed is reused by a later level, except where S B has at most
     :data:`WHOLE_S` entries (``whole``): then every state row keeps its own slot, and the
-    pass gives S. The design variables have columns in the pool (``marching``, n_m of
-    them: the boundary data, omega and the rigid alignment, in which S is zero) except the
-    lifted ones (``free``, n_f: a free correspondence's controls, which the march does not
-    read), whose reduced Jacobian is J_d's columns plus F_u H
+    pass gives S B. The pool's columns are the design's coordinates u (``basis`` B, n_d x
+    n_u: dd = B du, :func:`boundary_basis`) that the march reads (``marching``, n_m of them:
+    the boundary data, omega and the rigid alignment), and its first rows B's rows of the
+    design variables the march reads; the lifted design variables (``free``, in u, n_f: a
+    free correspondence's controls, B's identity there, which the march does not read)
+    have no column: their reduced Jacobian is J_d's columns plus F_u H
     (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
 
-    The pool's columns follow the boundary (``position``: the left edge from its top down
-    to the corner, then the bottom edge; omega, the alignment and any design variable
+    The pool's columns follow the boundary (``position``, (n_u,): the left edge from its
+    top down to the corner, then the bottom edge; omega, the alignment and any coordinate
     without a position at the corner): the state at vertex (i, j) reads only the boundary
-    data of the vertices (0..i, 0) and (0, 0..j), so every row of S is nonzero only in a
+    data of the vertices (0..i, 0) and (0, 0..j), so every row of S B is nonzero only in a
     range of columns around the corner, about (i + j) / (N + M) of them. The rows are
     gathered by their range, cut into :func:`_bands` bands (:class:`_Gram`), so the Gram
     matrices cost about a third of the dense products' arithmetic at large sizes.
@@ -365,13 +376,14 @@ class _Window:
     Static: built once from the sparsity; ``J`` (n_r x (n_d + n_s), design columns then the
     state in level order) has data = 1 + the index of each nonzero in the residuals'
     Jacobian (its direct part). ``pattern`` (state rows) and ``weights`` are the metric's
-    rows and their D; ``free`` (design positions) and ``lifted_rows`` (the residual rows
-    F_u H reaches, in the Lift's order) are empty without a lift; ``position`` (n_d,).
+    rows and their D; ``free`` (design positions, whose rows of B are their own columns')
+    and ``lifted_rows`` (the residual rows F_u H reaches, in the Lift's order) are empty
+    without a lift.
     """
 
     def __init__(self, levels: _Levels, J: sp.csr_matrix, pattern: np.ndarray,
                  weights: np.ndarray, free: np.ndarray, lifted_rows: np.ndarray,
-                 position: np.ndarray):
+                 basis: sp.csr_matrix, position: np.ndarray):
         n_d, n_s = levels.n_d, levels.n_s
         self.levels = levels
         level = np.empty(n_s, dtype=np.int64)
@@ -391,27 +403,29 @@ class _Window:
         np.maximum.at(last, Jcoo.col[state] - n_d, at[Jcoo.row[state]])
         if np.isin(free, W.indices[~uses]).any():
             raise RuntimeError("a lifted design variable is read by the marching equations")
-        self.free = free
-        marching = np.setdiff1d(np.arange(n_d), free)
+        self.free = basis[free].indices  # in u, in the order of ``free``
+        marching = np.setdiff1d(np.arange(basis.shape[1]), self.free)
         self.marching = marching[np.argsort(position[marching], kind="stable")]
         n_m = self.marching.size
         self.whole = n_s * n_m <= WHOLE_S
         slot = np.arange(n_s) if self.whole else self._slots(levels.bounds, last)
         self.pool = int(slot.max()) + 1 if n_s else 0
         self.mid = int(np.sum(position[self.marching] < 0))  # the first column at the corner
+        read = np.setdiff1d(np.arange(n_d), free)  # the design the march reads
+        self._top, self._design_span = self._design_rows(basis[read], n_d, read)
         column = np.full(n_d + n_s, -1, dtype=np.int64)  # -> pool row (-1: a free column)
-        column[self.marching] = np.arange(n_m)
-        column[n_d:] = n_m + slot
+        column[read] = np.arange(read.size)
+        column[n_d:] = read.size + slot
         free_column = np.full(n_d, -1, dtype=np.int64)
-        free_column[self.free] = np.arange(self.free.size)
-        width = n_m + self.pool
+        free_column[free] = np.arange(free.size)
+        width = read.size + self.pool
         self._slot = slot
-        span = self._spans(levels, column)
+        span = self._spans(levels, self._design_span)
         edges = _bands(n_m)
         # residual rows by level, in the order of their bands: (rows, their part in the
         # pool's columns, k x width, whose data is a view of one array refilled once a pass
         # from J's nonzeros at _index, and the segments (a, b, start, stop) of one range)
-        lo_r, hi_r = self._residual_spans(Jcoo, column, span, n_d)
+        lo_r, hi_r = self._residual_spans(Jcoo, column, self._design_span, span, n_d)
         order = np.lexsort((self._band(lo_r, hi_r, edges), at))
         bounds = np.searchsorted(at[order], np.arange(-1, len(levels.bounds) + 1))
         self._residuals, index, start = {}, [], 0
@@ -461,15 +475,35 @@ class _Window:
                                self._segments(span[0][mine], span[1][mine], edges)))
             self._chunks.append(chunks)
 
-    def _spans(self, levels: _Levels, column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The first and last pool column (each (n_s,)) in which each state row of S can be
-        nonzero, widened to hold the corner's column ``mid``: a level's rows read the design
-        columns and the earlier rows of their marching equations."""
+    def _design_rows(self, rows: sp.csr_matrix, n_d: int, read: np.ndarray
+                     ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """The pool's first rows (the ``rows`` of B that the march reads, in the pool's
+        columns; (k, n_m)) and the first and last pool column of each design variable's
+        row (each (n_d,); the corner's for one the march does not read)."""
+        place = np.full(rows.shape[1], -1, dtype=np.int64)
+        place[self.marching] = np.arange(self.marching.size)
+        coo = rows.tocoo()
+        if np.any(place[coo.col] < 0):
+            raise RuntimeError("a design variable the march reads has a lifted coordinate")
+        top = np.zeros((rows.shape[0], self.marching.size))
+        top[coo.row, place[coo.col]] = coo.data
+        first, last = np.full(n_d, self.mid), np.full(n_d, self.mid)
+        first[read], last[read] = n_d, -1
+        np.minimum.at(first, read[coo.row], place[coo.col])
+        np.maximum.at(last, read[coo.row], place[coo.col])
+        return top, (first, last)
+
+    def _spans(self, levels: _Levels, design: tuple[np.ndarray, np.ndarray]
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The first and last pool column (each (n_s,)) in which each state row of S B can
+        be nonzero, widened to hold the corner's column ``mid``: a level's rows read the
+        design (``design``: each design variable's first and last column, (n_d,)) and the
+        earlier rows of their marching equations."""
         n_d, n_s, W = levels.n_d, levels.n_s, levels.W
         first, last = np.full(n_s, self.mid), np.full(n_s, self.mid)
         for lo, hi in levels.bounds:
             start, stop = W.indptr[lo], W.indptr[hi]
-            a, b = self._entry_spans(W.indices[start:stop], column, first, last, n_d)
+            a, b = self._entry_spans(W.indices[start:stop], design, (first, last), n_d)
             counts = np.diff(W.indptr[lo:hi + 1])
             has = counts > 0
             starts = (W.indptr[lo:hi] - start)[has]
@@ -478,27 +512,29 @@ class _Window:
         return first, last
 
     def _residual_spans(self, coo: sp.coo_matrix, column: np.ndarray,
+                        design: tuple[np.ndarray, np.ndarray],
                         span: tuple[np.ndarray, np.ndarray], n_d: int
                         ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_spans` of the residual rows (each (n_r,)), over their entries in J
-        (``coo``)."""
+        (``coo``; ``column``: the pool row of each variable, -1 for a free one)."""
         pooled = column[coo.col] >= 0
-        a, b = self._entry_spans(coo.col, column, *span, n_d)
+        a, b = self._entry_spans(coo.col, design, span, n_d)
         first, last = np.full(coo.shape[0], self.mid), np.full(coo.shape[0], self.mid)
         np.minimum.at(first, coo.row[pooled], a[pooled])
         np.maximum.at(last, coo.row[pooled], b[pooled])
         return first, last
 
     @staticmethod
-    def _entry_spans(cols: np.ndarray, column: np.ndarray, first: np.ndarray,
-                     last: np.ndarray, n_d: int) -> tuple[np.ndarray, np.ndarray]:
+    def _entry_spans(cols: np.ndarray, design: tuple[np.ndarray, np.ndarray],
+                     state: tuple[np.ndarray, np.ndarray], n_d: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
         """Per variable ``cols`` (indices into [design, state]): the first and last pool
-        column of its row of S, a design variable's own column, a state variable's from
-        ``first`` and ``last`` (n_s,)."""
-        design = cols < n_d
-        own = column[np.minimum(cols, n_d - 1)]
-        state = np.maximum(cols - n_d, 0)
-        return np.where(design, own, first[state]), np.where(design, own, last[state])
+        column of its row in the pool, from ``design`` ((n_d,) each) or ``state`` ((n_s,)
+        each)."""
+        is_design = cols < n_d
+        d, k = np.minimum(cols, n_d - 1), np.maximum(cols - n_d, 0)
+        return (np.where(is_design, design[0][d], state[0][k]),
+                np.where(is_design, design[1][d], state[1][k]))
 
     @staticmethod
     def _band(first: np.ndarray, last: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -556,25 +592,25 @@ class _Window:
 
     def __call__(self, J: np.ndarray, r: np.ndarray, lift: Lift | None,
                  metric: bool = True) -> tuple | None:
-        """(J' J, J' r, S_p' D_p S_p, S), in the design's order, at the residuals' Jacobian
-        nonzeros J (its direct part), its ``lift`` (columns in the order of ``free``) and
-        the residuals r (n_r,), with the levels refilled at the same point; None where they
-        are not finite. ``metric``: False skips the metric (None in its place); S (n_s,
-        n_m; its columns ``marching``) is None unless ``whole``."""
-        n_m = self.marching.size
-        pool = np.zeros((n_m + self.pool, n_m))  # [I; the working set of S]
-        pool[:n_m] = np.eye(n_m)
+        """(J' J, J' r, B' S_p' D_p S_p B, S B), in u, at the residuals' Jacobian nonzeros J
+        (its direct part), its ``lift`` (columns in the order of ``free``) and the residuals
+        r (n_r,), with the levels refilled at the same point; None where they are not
+        finite. ``metric``: False skips the metric (None in its place); S B (n_s, n_m; its
+        columns ``marching``) is None unless ``whole``."""
+        top = self._top.shape[0]
+        pool = np.zeros((top + self.pool, self.marching.size))  # [B's rows; the working set]
+        pool[:top] = self._top
         self._data[:] = J[self._index]
         self._free.data[:] = J[self._free_index]
         Jf = self._free.toarray()  # the free columns of J (n_r, n_f): S is zero in them
         if lift is not None:
             Jf[self._lifted_rows] += lift.product()
-        sums = _Sums(n_m, self.mid, Jf, r)
+        sums = _Sums(self.marching.size, self.mid, Jf, r)
         self._reduce(-1, pool, sums)
         for k, chunks in enumerate(self._chunks):
             for lo, hi, W, mine, perm, root, segments in chunks:
                 S = W @ pool
-                pool[n_m + self._slot[lo:hi]] = S
+                pool[top + self._slot[lo:hi]] = S
                 if metric and mine:
                     rows = S[:mine] if perm is None else S[perm]
                     for a, b, start, stop in segments:
@@ -583,7 +619,7 @@ class _Window:
         out = sums.total(self.marching, self.free, metric)
         if not all(a is None or np.all(np.isfinite(a)) for a in out):
             return None
-        return (*out, pool[n_m:] if self.whole else None)
+        return (*out, pool[top:] if self.whole else None)
 
     def _reduce(self, k: int, pool: np.ndarray, sums: "_Sums") -> None:
         """The residual rows reduced at level k added to the sums (in place)."""
@@ -709,10 +745,14 @@ class Manifold:
     Built once per NLP: the index sets (``state`` in the order of the levels of the
     marching equations), the levels, the CasADi Function of the residuals and constraints
     (trial points) and their Jacobians from local stencils (``nlp.r_jacobian``,
-    ``nlp.g_jacobian``; accepted points).
+    ``nlp.g_jacobian``; accepted points). The steps are taken in the coordinates u of the
+    design's ``basis`` B (n_d x n_u, dd = B du; :func:`boundary_basis` with ``knots``, the
+    identity with None or where no class of boundary data has more than ``knots``
+    entries); ``coarse`` tells whether it is coarser than the identity, and
+    :meth:`refine` makes it the identity.
     """
 
-    def __init__(self, nlp: NLP):
+    def __init__(self, nlp: NLP, knots: int | None = None):
         if nlp.project is None or nlp.design_index is None or nlp.r_jacobian is None:
             raise InputError("solver='levenberg-marquardt' needs the simultaneous transcription")
         self.nlp = nlp
@@ -738,14 +778,41 @@ class Manifold:
         where[self.state] = np.arange(self.state.size)
         self.pattern = where[np.flatnonzero(pattern & ~design & ~fixed)]
         weights = nlp.damping_weights
-        self.design_weights = weights[self.design]
+        self._design_weights = weights[self.design]
         self.pattern_weights = weights[self.state][self.pattern]
         bounded = (np.isfinite(nlp.lbx) | np.isfinite(nlp.ubx)) & ~fixed
         self.bounded_design = np.flatnonzero(bounded[self.design])
         self.bounded_state = np.flatnonzero(bounded[self.state])
         self.lower = self.inequalities(nlp.lbg, nlp.lbx)
         self.upper = self.inequalities(nlp.ubg, nlp.ubx)
-        self._slice_jacobians(G)
+        J = self._slice_jacobians(G)
+        self._use_basis(None if knots is None or nlp.boundary_class is None else
+                        boundary_basis(nlp.boundary_class[self.design], self._position, knots),
+                        J)
+
+    @property
+    def coarse(self) -> bool:
+        """Whether the basis is coarser than the identity (n_u < n_d)."""
+        return self.basis.shape[1] < self.design.size
+
+    def refine(self) -> None:
+        """Make the basis the identity (the pass rebuilt for it)."""
+        self._window = None  # its structures go before the new ones are built
+        self._use_basis(None, self._pooled(self._jacobian_r.pattern().tocsr()))
+
+    def _use_basis(self, basis: tuple[sp.csr_matrix, np.ndarray] | None,
+                   J: sp.csr_matrix) -> None:
+        """The basis (B, the position of each coordinate; None: the identity) and the pass
+        for it (:class:`_Window`) over the residuals' Jacobian pattern ``J``
+        (:meth:`_pooled`)."""
+        if basis is None:
+            basis = sp.identity(self.design.size, format="csr"), self._position
+        self.basis, position = basis
+        w = sp.diags(self._design_weights)
+        self.design_metric = (self.basis.T @ w @ self.basis).toarray()  # B' D_d B
+        free, lifted_rows = self._lifted()
+        self._window = _Window(self._sweeps, J, self.pattern, self.pattern_weights, free,
+                               lifted_rows, self.basis, position)
         if self._window.whole:
             _blas()  # the libraries scanned in the build, not in the first solve
 
@@ -784,12 +851,11 @@ class Manifold:
         position[order] = np.arange(order.size)
         self.match = position[match]  # the unknown (state index) of each marching equation
 
-    def _slice_jacobians(self, G: sp.csr_matrix) -> None:
-        """The fixed blocks of J and G (the pattern of :meth:`_order_by_level`), the
-        marching equations by level (:class:`_Levels`) and the pass that reduces J and the
-        metric through them (:class:`_Window`)."""
+    def _slice_jacobians(self, G: sp.csr_matrix) -> sp.csr_matrix:
+        """The fixed blocks of J and G (the pattern of :meth:`_order_by_level`) and the
+        marching equations by level (:class:`_Levels`); returns J's pattern for the pass
+        (:meth:`_pooled`)."""
         J = self._jacobian_r.pattern().tocsr()  # with a lift, its direct part
-        free, lifted_rows = self._lifted()
         self._J_design = _Sliced(J[:, self.design])
         self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]
@@ -803,11 +869,14 @@ class Manifold:
         off = sp.csr_matrix((Cs.data[~own], (Cs.row[~own], Cs.col[~own])), shape=Cs.shape)
         sizes = np.cumsum([0] + [rows.size for rows in self.levels])
         self._sweeps = _Levels(Cd, off, list(zip(sizes[:-1], sizes[1:])), diagonal)
-        position = (np.zeros(self.design.size) if self.nlp.boundary_position is None else
-                    np.nan_to_num(self.nlp.boundary_position[self.design], nan=0.0))
-        self._window = _Window(self._sweeps, sp.hstack([J[:, self.design], J[:, self.state]]),
-                               self.pattern, self.pattern_weights, free, lifted_rows,
-                               position)
+        self._position = (np.zeros(self.design.size) if self.nlp.boundary_position is None
+                          else np.nan_to_num(self.nlp.boundary_position[self.design], nan=0.0))
+        return self._pooled(J)
+
+    def _pooled(self, J: sp.csr_matrix) -> sp.csr_matrix:
+        """The residuals' Jacobian pattern (its direct part, data = 1 + the index of each
+        nonzero) with the design's columns first, then the state's in level order."""
+        return sp.hstack([J[:, self.design], J[:, self.state]], format="csr")
 
     def _lifted(self) -> tuple[np.ndarray, np.ndarray]:
         """With a lifted residual Jacobian: the design positions of its lifted columns that
@@ -869,15 +938,15 @@ class Manifold:
             return None
         if not self._sweeps.refill(G):
             return None
-        G_design, G_state = self._G_design(G), self._G_state(G)
+        G_design, G_state = self._G_design(G) @ self.basis, self._G_state(G)
         del G  # all of g's nonzeros, not held through the pass
         reduced = self._window(J, p.r, lift, metric)
         if reduced is None:
             return None
-        return _Linearization(J_design=self._J_design(J), J_state=self._J_state(J),
-                              G_design=G_design, G_state=G_state,
+        return _Linearization(J_design=self._J_design(J) @ self.basis,
+                              J_state=self._J_state(J), G_design=G_design, G_state=G_state,
                               sensitivity=_Sensitivity(self._sweeps, reduced[3],
-                                                       self._window.marching),
+                                                       self._window.marching, self.basis),
                               JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],
                               lift=lift)
 
@@ -900,6 +969,48 @@ class Manifold:
         nlp = self.nlp
         return float(max(0.0, np.max(nlp.lbg - p.g), np.max(p.g - nlp.ubg),
                          np.max(nlp.lbx - p.x), np.max(p.x - nlp.ubx)))
+
+
+def boundary_basis(klass: np.ndarray, position: np.ndarray, knots: int
+                   ) -> tuple[sp.csr_matrix, np.ndarray] | None:
+    """A coarse basis of the design, B (n_d x n_u), and the position of each coordinate
+    (n_u,); None where no class has more than ``knots`` entries (B would be the identity).
+
+    Each class of boundary data (``klass`` (n_d,) >= 0: one array along one edge, one
+    parity, :attr:`rffqm_nlp.transcription.NLP.boundary_class`) of m > ``knots`` entries,
+    ordered by their distance from the corner (``position``, (n_d,)), is piecewise linear
+    in its index between ``knots`` knots spread evenly from its first entry to its last
+    (a coordinate per knot: its entry's value); every other design variable is its own
+    coordinate. A pattern far finer than the target's features then keeps the step's
+    dense matrices at (12 knots + the rest)^2 instead of n_d^2 (docs/solvers.md)."""
+    if knots < 2:
+        raise InputError(f"boundary knots must be at least 2, got {knots}")
+    rows, cols, values, at = [], [], [], []
+    coarse = False
+    for c in np.unique(klass):
+        members = np.flatnonzero(klass == c)
+        if c < 0 or members.size <= knots:
+            rows.append(members)
+            cols.append(len(at) + np.arange(members.size))
+            values.append(np.ones(members.size))
+            at.extend(position[members])
+            continue
+        coarse = True
+        members = members[np.argsort(np.abs(position[members]), kind="stable")]
+        index = np.arange(members.size)
+        knot = np.unique(np.round(np.linspace(0, members.size - 1, knots)).astype(np.int64))
+        left = np.minimum(np.searchsorted(knot, index, "right") - 1, knot.size - 2)
+        weight = (index - knot[left]) / (knot[left + 1] - knot[left])
+        rows += [members, members]
+        cols += [len(at) + left, len(at) + left + 1]
+        values += [1.0 - weight, weight]
+        at.extend(position[members[knot]])
+    if not coarse:
+        return None
+    B = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(klass.size, len(at)))
+    B.eliminate_zeros()
+    return B, np.array(at)
 
 
 def _gathered(csr: sp.csr_matrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -962,7 +1073,7 @@ def _model(man: Manifold, p: _Point, lin: _Linearization,
     """The model at p; its metric from ``lin``, or ``M`` (n_d, n_d) where ``lin`` has
     none (linearised without it)."""
     if lin.pattern_metric is not None:
-        M = lin.pattern_metric + np.diag(man.design_weights)
+        M = lin.pattern_metric + man.design_metric
     if M is None:
         raise ValueError("a linearisation without the metric needs the metric to keep")
     now = man.inequalities(p.g, p.x)
@@ -989,11 +1100,12 @@ class _Steps:
         self.man = man
         self._qps: dict[int, ca.Function] = {}
 
-    def change(self, m: _Model, dd: np.ndarray) -> np.ndarray:
-        """A dd for every inequality row."""
-        ds = m.lin.state_change(dd)
-        return np.concatenate([m.lin.G_design @ dd + m.lin.G_state @ ds,
-                               dd[self.man.bounded_design], ds[self.man.bounded_state]])
+    def change(self, m: _Model, du: np.ndarray) -> np.ndarray:
+        """A du for every inequality row (du (n_u,), in the basis' coordinates)."""
+        ds = m.lin.state_change(du)
+        return np.concatenate([m.lin.G_design @ du + m.lin.G_state @ ds,
+                               (self.man.basis @ du)[self.man.bounded_design],
+                               ds[self.man.bounded_state]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
         """The dense rows ``which`` of A (which.size, n_d), each swept back once per model
@@ -1002,18 +1114,18 @@ class _Steps:
         if new.size:
             m.known.update(zip(new.tolist(), self._swept(m, new)))
         return np.array([m.known[i] for i in which.tolist()]).reshape(which.size,
-                                                                      self.man.design.size)
+                                                                      self.man.basis.shape[1])
 
     def _swept(self, m: _Model, which: np.ndarray) -> np.ndarray:
-        """The dense rows ``which`` of A (which.size, n_d): a state row's part by the
+        """The dense rows ``which`` of A (which.size, n_u): a state row's part by the
         adjoint sweep, a block of rows at a time (:data:`BLOCK`)."""
         man, lin = self.man, m.lin
         ng, nbd = man.ineq.size, man.bounded_design.size
-        A = np.zeros((which.size, man.design.size))
+        A = np.zeros((which.size, man.basis.shape[1]))
         g_rows = np.flatnonzero(which < ng)
         A[g_rows] = lin.G_design[which[g_rows]].toarray()
         d_rows = (which >= ng) & (which < ng + nbd)
-        A[np.flatnonzero(d_rows), man.bounded_design[which[d_rows] - ng]] = 1.0
+        A[d_rows] = man.basis[man.bounded_design[which[d_rows] - ng]].toarray()
         s_rows = np.flatnonzero(which >= ng + nbd)
         state = sp.vstack([lin.G_state[which[g_rows]],
                            sp.csr_matrix((np.ones(s_rows.size),
@@ -1125,29 +1237,42 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     stops; ``stop(x)``: end once it holds at an accepted iterate; ``callback(objective,
     violation)`` at the start and after every accepted step; ``tol``: of the optimality
     error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build).
+
+    With a coarse basis (:attr:`Manifold.coarse`) the steps are taken in it first; where
+    that run ends optimal in it or stalls, the manifold is refined and the run goes on in
+    the whole design from there, so "Solve_Succeeded" always means the whole design's
+    optimality conditions.
     """
     man = Manifold(nlp) if manifold is None else manifold
     with man.blas_threads():
-        return _levenberg_marquardt(man, x, damping, max_iter, deadline, stop, callback, tol)
+        out = _levenberg_marquardt(man, x, damping, max_iter, deadline, stop, callback, tol)
+    if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled"):
+        return out
+    man.refine()
+    with man.blas_threads():
+        rest = _levenberg_marquardt(man, out.x, damping, max_iter - out.iterations, deadline,
+                                    stop, callback, tol, announce=False)
+    return replace(rest, iterations=out.iterations + rest.iterations)
 
 
 def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter: int,
                          deadline: float | None,
                          stop: Callable[[np.ndarray], bool] | None,
                          callback: Callable[[float, float], None] | None,
-                         tol: float) -> Outcome:
-    """:func:`levenberg_marquardt` on ``man``."""
+                         tol: float, announce: bool = True) -> Outcome:
+    """:func:`levenberg_marquardt` on ``man`` (``announce``: the callback at the start
+    too)."""
     nlp = man.nlp
     start = nlp.project(np.asarray(x, dtype=float))
     p = None if start is None else man.point(start)
     if p is None or man.violation(p) > FEASIBLE:
         return Outcome(x=np.asarray(x, dtype=float), objective=None, iterations=0,
                        status="Inadmissible_Start")
-    if callback is not None:
+    if callback is not None and announce:
         callback(p.objective, man.violation(p))
     steps = _Steps(man)
     lam, nu, it = float(damping), 2.0, 0
-    B = np.zeros((man.design.size, man.design.size))
+    B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
     augmented, scale, error, last, kept = False, None, None, None, None
     status = "Maximum_Iterations_Exceeded"
@@ -1161,7 +1286,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
         kept = m.M
         if last is not None:
             pairs = (pairs + [(last.step, *last.gradient_change(m, steps))])[-SECANT_PAIRS:]
-            B = _secant_term(pairs, man.design.size)
+            B = _secant_term(pairs, man.basis.shape[1])
         if augmented and _positive_definite(m.H + B + lam * m.M):
             m.H = m.H + B
         scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)
@@ -1180,7 +1305,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                 dd = step.dd
                 predicted = -(m.grad @ dd + 0.5 * dd @ m.H @ dd)
                 xt = p.x.copy()
-                xt[man.design] += dd
+                xt[man.design] += man.basis @ dd
                 xt = nlp.project(xt)
                 trial = None if xt is None or predicted <= 0 else man.point(xt)
             if trial is not None and trial.objective < p.objective:
@@ -1202,7 +1327,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
         actual = p.objective - trial.objective
         rho = actual / predicted
         lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
-        last = _Last(m, steps, step, trial.x[man.design] - p.x[man.design], trial)
+        last = _Last(m, steps, step, dd, trial)
         augmented = last.augmented_predicts_better(actual, B)
         p, it = trial, it + 1
         if callback is not None:

@@ -76,6 +76,11 @@ class NLP:
     #: between its vertices; NaN elsewhere. The state at vertex (i, j) reads only the
     #: boundary data in [-i, j] (:mod:`rffqm_nlp.reduced` uses it to order the design)
     boundary_position: np.ndarray | None = None
+    #: per entry of x that is boundary data, its class: the array (A or B at the left
+    #: edge's vertices, at the bottom edge's, LV, LH) and the parity of its index along the
+    #: edge, 2 x 6 classes numbered from 0 (a Miura-ori's boundary data alternate between
+    #: two values along each edge); -1 elsewhere (:func:`rffqm_nlp.reduced.boundary_basis`)
+    boundary_class: np.ndarray | None = None
     #: the Jacobians of the residuals and of g assembled from local stencils
     #: (:mod:`rffqm_nlp.stencils`), for :mod:`rffqm_nlp.reduced`; None: only CasADi's
     #: Jacobians of the whole graph
@@ -878,6 +883,12 @@ def simultaneous(setup: Setup) -> NLP:
         position[lay.index(name, 0, slice(1, None))] = np.arange(1, m1)
     position[lay.index("LV", slice(None), 0)] = -(np.arange(N) + 0.5)
     position[lay.index("LH", 0, slice(None))] = np.arange(M) + 0.5
+    boundary_class = np.full(lay.size, -1, dtype=np.int64)
+    for kind, (name, rows, cols, index) in enumerate([
+            ("A", slice(None), 0, np.arange(n1)), ("B", slice(None), 0, np.arange(n1)),
+            ("A", 0, slice(1, None), np.arange(1, m1)), ("B", 0, slice(1, None), np.arange(1, m1)),
+            ("LV", slice(None), 0, np.arange(N)), ("LH", 0, slice(None), np.arange(M))]):
+        boundary_class[lay.index(name, rows, cols)] = 2 * kind + index % 2
 
     lengths = np.zeros(lay.size, dtype=bool)
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
@@ -893,7 +904,7 @@ def simultaneous(setup: Setup) -> NLP:
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
                damping_weights=weights, design_index=design,
                pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
-               boundary_position=position,
+               boundary_position=position, boundary_class=boundary_class,
                grid_index=None if corr is None else grid_index,
                r_jacobian=_residual_jacobian(setup, lay, res.numel()),
                g_jacobian=_constraint_jacobian(setup, lay, start.sigma, tree, g.numel()))

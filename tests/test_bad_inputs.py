@@ -125,6 +125,8 @@ def _wrong_lengths_and_ranges() -> list[tuple[str, str, list[str]]]:
         ("range-tol", design_file(solve_lines="tol = 0.0"), ["[solve] tol"]),
         ("range-time-limit", design_file(solve_lines="time_limit = -1"), ["[solve] time_limit"]),
         ("range-seed", design_file(solve_lines="seed = -1"), ["[solve] seed"]),
+        ("range-boundary-knots", design_file(solve_lines="boundary_knots = 1"),
+         ["[solve] boundary_knots", "at least 2"]),
         ("range-solver", design_file(solve_lines='solver = "bfgs"'), ["[solve] solver"]),
         ("range-layout", design_file(design_lines='layout = "zigzag_k"'),
          ["[design] layout", "did you mean"]),
@@ -402,6 +404,12 @@ def test_memory_model_matches_the_measured_peaks():
     # a refusal should err high: the model is at least each Levenberg-Marquardt peak (to 1%)
     for n, peak in ((100, 0.39), (200, 1.13), (300, 2.04), (500, 5.40)):
         assert gb(n) >= 0.99 * peak
+    # with stop_rms the run may end in the coarse basis of 32 knots a class (4.80 GB at
+    # 500 x 500, 2026-12-03); below 64 panels a side there is none
+    coarse = lambda n: gb(n, stop_rms=0.009)  # noqa: E731
+    assert 0.99 * 4.80 <= coarse(500) <= 1.2 * 4.80
+    assert coarse(40) == gb(40) and coarse(200) < gb(200)
+    assert gb(500, stop_rms=0.009, boundary_knots=0) == gb(500)
     assert gb(100, solver="ipopt") == pytest.approx(2.1, rel=0.15)
     assert gb(200, solver="ipopt") == pytest.approx(7.2, rel=0.15)
     assert gb(20, solver="ipopt", transcription="sequential") < 2
@@ -432,7 +440,8 @@ def test_design_problem_raises_input_error_naming_the_field(kw, name):
     ({"ipopt_options": {"mu_init": [1]}}, "ipopt_options.mu_init"),
     ({"ipopt_options": {"Bad Name": 1}}, "ipopt_options"),
     ({"continuation": 10.0}, "[solve] continuation"), ({"solver": None}, "[solve] solver"),
-    ({"stop_rms": math.nan}, "[solve] stop_rms"), ({"seed": 1.5}, "[solve] seed")])
+    ({"stop_rms": math.nan}, "[solve] stop_rms"), ({"seed": 1.5}, "[solve] seed"),
+    ({"boundary_knots": 2.5}, "[solve] boundary_knots")])
 def test_solve_options_raise_input_error_naming_the_field(kw, name):
     with pytest.raises(InputError) as info:
         design.SolveOptions(**kw)

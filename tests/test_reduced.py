@@ -198,21 +198,12 @@ def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, widt
     p = man.point(man.nlp.project(man.nlp.x0))
     lin = man.linearize(p)
     S = lin.state_change(np.eye(man.design.size))[:, window.marching]  # the pool's columns
-    first, last = window._spans(lin.sensitivity.levels, _pool_columns(man))
+    first, last = window._spans(lin.sensitivity.levels, window._design_span)
     columns = np.arange(S.shape[1])
     outside = (columns < first[:, None]) | (columns > last[:, None])
     assert np.all(S[outside] == 0)
     assert np.mean(last - first + 1) < 0.75 * window.marching.size
     _assert_level_pass_matches_dense(man, 0)
-
-
-def _pool_columns(man: reduced.Manifold) -> np.ndarray:
-    """The pool column of each design and state variable of the pass (-1: a free one)."""
-    window = man._window
-    column = np.full(man.design.size + man.state.size, -1, dtype=np.int64)
-    column[window.marching] = np.arange(window.marching.size)
-    column[man.design.size:] = window.marching.size + window._slot
-    return column
 
 
 def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
@@ -265,6 +256,96 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     np.testing.assert_array_equal(reduced._model(man, p, bare, m.M).M, m.M)
     with pytest.raises(ValueError, match="metric"):
         reduced._model(man, p, bare)
+
+@pytest.mark.parametrize("knots", [2, 3, 4])
+def test_the_boundary_basis_interpolates_each_class_between_its_knots(knots):
+    """Each class of boundary data (one array, one edge, one parity) longer than ``knots``
+    is linear between ``knots`` knots: B's rows sum to one, have at most two entries, and
+    reproduce from the knots' values any linear function of the place along the edge; a
+    column never mixes classes; other design variables are their own columns."""
+    prob, _ = small("quarter_vase", panels=(16, 16))
+    nlp = prob.transcribe()
+    man = reduced.Manifold(nlp)
+    klass, position = nlp.boundary_class[man.design], man._position
+    sizes = np.bincount(klass[klass >= 0])
+    assert sizes.size == 12 and sizes.max() > knots
+    B, at = reduced.boundary_basis(klass, position, knots)
+    assert B.shape == (man.design.size, int(np.sum(klass < 0) + np.minimum(sizes, knots).sum()))
+    np.testing.assert_allclose(np.asarray(B.sum(axis=1)).ravel(), 1.0, rtol=0, atol=1e-15)
+    assert np.diff(B.indptr).max() == 2
+    linear = lambda t: 0.3 + 2.0 * np.abs(t)  # noqa: E731
+    np.testing.assert_allclose(B @ linear(at), linear(position), rtol=0, atol=1e-12)
+    coo = B.tocoo()
+    for column in range(B.shape[1]):
+        assert np.unique(klass[coo.row[coo.col == column]]).size == 1
+    own = np.flatnonzero(klass < 0)
+    assert np.all(np.diff(B[own].indptr) == 1) and np.all(B[own].data == 1)
+    assert reduced.boundary_basis(klass, position, int(sizes.max())) is None
+    with pytest.raises(rq.InputError, match="at least 2"):
+        reduced.boundary_basis(klass, position, 1)
+
+
+@pytest.mark.parametrize("whole", [True, False])
+@pytest.mark.parametrize("correspondence", ["free", "lattice"])
+def test_the_pass_in_a_coarse_basis_is_the_whole_designs_times_the_basis(monkeypatch, whole,
+                                                                         correspondence):
+    """Every derivative of the manifold in the coarse basis B is that of the whole design
+    times B: J' J, J' r, the metric, the sweeps, the inequality rows and their change, with
+    S B kept whole or by its working set (whose rows are zero outside their spans)."""
+    if not whole:
+        monkeypatch.setattr(reduced, "WHOLE_S", 0)
+    prob, _ = small("quarter_vase", panels=(16, 16), correspondence=correspondence)
+    nlp, rng = prob.transcribe(), np.random.default_rng(3)
+    coarse, full = reduced.Manifold(nlp, knots=3), reduced.Manifold(nlp)
+    assert coarse.coarse and not full.coarse and coarse._window.whole == whole
+    B = coarse.basis.toarray()
+    x = nlp.x0.copy()
+    x[coarse.design] += 1e-3 * rng.standard_normal(coarse.design.size)
+    p = coarse.point(nlp.project(x))
+    a, b = coarse.linearize(p), full.linearize(p)
+
+    def close(mine, dense):
+        np.testing.assert_allclose(mine, dense, rtol=0, atol=1e-12 * np.abs(dense).max())
+
+    close(a.JtJ, B.T @ b.JtJ @ B)
+    close(a.grad, B.T @ b.grad)
+    U, Y = rng.standard_normal((B.shape[1], 3)), rng.standard_normal((coarse.state.size, 3))
+    close(a.state_change(U), b.state_change(B @ U))
+    close(a.jacobian_times(U), b.jacobian_times(B @ U))
+    close(a.sensitivity.adjoint(Y), B.T @ b.sensitivity.adjoint(Y))
+    w = rng.standard_normal(p.r.size)
+    close(a.jacobian_transpose(w), B.T @ b.jacobian_transpose(w))
+    ma, mb = reduced._model(coarse, p, a), reduced._model(full, p, b)
+    close(ma.M, B.T @ mb.M @ B)
+    which = rng.choice(ma.lower.size, 40, replace=False)
+    close(reduced._Steps(coarse).rows(ma, which), reduced._Steps(full).rows(mb, which) @ B)
+    du = rng.standard_normal(B.shape[1])
+    close(reduced._Steps(coarse).change(ma, du), reduced._Steps(full).change(mb, B @ du))
+    window = coarse._window
+    S = a.state_change(np.eye(B.shape[1]))[:, window.marching]
+    first, last = window._spans(a.sensitivity.levels, window._design_span)
+    columns = np.arange(S.shape[1])
+    assert np.all(S[(columns < first[:, None]) | (columns > last[:, None])] == 0)
+
+
+def test_a_run_in_a_coarse_basis_goes_on_in_the_whole_design_to_its_optimum(monkeypatch):
+    """Optimal in the coarse basis, the run is refined once and ends at the whole design's
+    optimum (that of a run without the basis), every accepted step logged once; with a fit
+    reached in the coarse basis it is not refined."""
+    prob, opts = small("quarter_vase", panels=(16, 16))
+    refined, refine = [], reduced.Manifold.refine
+    monkeypatch.setattr(reduced.Manifold, "refine",
+                        lambda self: refined.append(self.basis.shape) or refine(self))
+    coarse = prob.solve(replace(opts, boundary_knots=3))
+    assert len(refined) == 1 and refined[0][1] < refined[0][0]
+    whole = prob.solve(replace(opts, boundary_knots=0))
+    assert len(refined) == 1
+    assert coarse.stats.status == whole.stats.status == "Solve_Succeeded"
+    assert coarse.stats.objective == pytest.approx(whole.stats.objective, rel=1e-6)
+    assert len(coarse.stats.history["objective"]) == coarse.stats.iterations + 1
+    fit = prob.solve(replace(opts, boundary_knots=3, stop_rms=0.05))
+    assert fit.stats.status == "Fit_Reached" and len(refined) == 1
+
 
 @pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
 def test_levenberg_marquardt_alone_reaches_ipopts_optimum(name):
@@ -455,7 +536,7 @@ def test_iteration_and_time_limits_raise_solver_failed_with_an_admissible_best()
 
 
 @pytest.mark.parametrize("kw", [{"solver": "newton"}, {"transcription": "sequential"},
-                                {"damping": 0.0}])
+                                {"damping": 0.0}, {"boundary_knots": 1}])
 def test_invalid_solver_options_raise_input_error(kw):
     with pytest.raises(rq.InputError):
         small("sphere_cap", **kw)
