@@ -47,7 +47,7 @@ def matrix_free_product(man: reduced.Manifold, lin, V: np.ndarray, lam: float) -
         JV[lin.lift.rows] += lin.lift.times(V)
     Y = lin.J_state.T @ JV
     Y[man.pattern] += lam * man.pattern_weights[:, None] * SV[man.pattern]
-    out = lin.J_design.T @ JV + lin.sensitivity.adjoint(Y) + lam * man.design_weights[:, None] * V
+    out = lin.J_design.T @ JV + lin.sensitivity.adjoint(Y) + lam * man.design_metric @ V
     if lin.lift is not None:
         out[lin.lift.columns] += lin.lift.transpose_times(JV)
     return out
@@ -96,7 +96,7 @@ def measure(target: str, n: int) -> dict:
     metric_eig = la.eigvalsh(H, m.M)
     b = -m.grad
     exact = -0.5 * float(b @ la.solve(H, b))  # q at the exact step
-    D = lam * man.design_weights
+    D = lam * np.diag(man.design_metric)
     factor = la.cho_factor(m.M)
     preconditioners = {"none": lambda r: r, "lam D_d": lambda r: r / D,
                        "Jacobi": lambda r: r / np.diag(H),
