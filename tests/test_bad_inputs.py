@@ -386,8 +386,8 @@ def test_the_side_length_memory_model_matches_the_measured_peaks():
 def test_memory_model_matches_the_measured_peaks():
     """docs/solvers.md: Levenberg-Marquardt in the whole design 0.39 and 1.08 GB at 100 and
     200 panels a side with the target lattice fixed, 0.39, 1.13, 2.04 and 5.40 GB at 100,
-    200, 300 and 500 with the free correspondence (2026-12-03), IPOPT (simultaneous) 2.1 GB at 100 x 100 and
-    6.9-7.4 GB at 200 x 200."""
+    200, 300 and 500 with the free correspondence (2026-12-03), IPOPT (simultaneous) 2.1 GB
+    at 100 x 100 and 6.9-7.4 GB at 200 x 200."""
     target = rq.surfaces.get("sphere_cap")
 
     def gb(panels: int, correspondence: str = "free", **options) -> float:

@@ -257,6 +257,7 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     with pytest.raises(ValueError, match="metric"):
         reduced._model(man, p, bare)
 
+
 @pytest.mark.parametrize("knots", [2, 3, 4])
 def test_the_boundary_basis_interpolates_each_class_between_its_knots(knots):
     """Each class of boundary data (one array, one edge, one parity) longer than ``knots``
