@@ -809,7 +809,7 @@ class Manifold:
             basis = sp.identity(self.design.size, format="csr"), self._position
         self.basis, position = basis
         w = sp.diags(self._design_weights)
-        self.design_metric = (self.basis.T @ w @ self.basis).toarray()  # B' D_d B
+        self.design_metric = (self.basis.T @ w @ self.basis).tocsr()  # B' D_d B, sparse
         free, lifted_rows = self._lifted()
         self._window = _Window(self._sweeps, J, self.pattern, self.pattern_weights, free,
                                lifted_rows, self.basis, position)
@@ -1073,7 +1073,7 @@ def _model(man: Manifold, p: _Point, lin: _Linearization,
     """The model at p; its metric from ``lin``, or ``M`` (n_d, n_d) where ``lin`` has
     none (linearised without it)."""
     if lin.pattern_metric is not None:
-        M = lin.pattern_metric + man.design_metric
+        M = lin.pattern_metric + man.design_metric.toarray()
     if M is None:
         raise ValueError("a linearisation without the metric needs the metric to keep")
     now = man.inequalities(p.g, p.x)

@@ -96,7 +96,7 @@ def measure(target: str, n: int) -> dict:
     metric_eig = la.eigvalsh(H, m.M)
     b = -m.grad
     exact = -0.5 * float(b @ la.solve(H, b))  # q at the exact step
-    D = lam * np.diag(man.design_metric)
+    D = lam * man.design_metric.diagonal()
     factor = la.cho_factor(m.M)
     preconditioners = {"none": lambda r: r, "lam D_d": lambda r: r / D,
                        "Jacobi": lambda r: r / np.diag(H),
