@@ -131,13 +131,15 @@ class Outcome:
     optimal to ``tol``), "Fit_Reached" (``stop`` held), "Stalled" (no step lowers the
     loss), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
     "Inadmissible_Start" (the start, re-marched, breaks a constraint or does not march: no
-    step was taken, ``x`` is the start as given and ``objective`` None)."""
+    step was taken, ``x`` is the start as given and ``objective`` None). ``scale``: the
+    optimality error's, max(1, |J' r at the start| / 100) (None before the first model)."""
 
     x: np.ndarray
     objective: float | None
     iterations: int
     status: str
     kkt_error: float | None = None
+    scale: float | None = None
 
     @property
     def success(self) -> bool:
@@ -1240,8 +1242,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
 
     With a coarse basis (:attr:`Manifold.coarse`) the steps are taken in it first; where
     that run ends optimal in it or stalls, the manifold is refined and the run goes on in
-    the whole design from there, so "Solve_Succeeded" always means the whole design's
-    optimality conditions.
+    the whole design from there, its optimality error scaled as the first run's, so
+    "Solve_Succeeded" always means the whole design's optimality conditions.
     """
     man = Manifold(nlp) if manifold is None else manifold
     with man.blas_threads():
@@ -1251,7 +1253,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     man.refine()
     with man.blas_threads():
         rest = _levenberg_marquardt(man, out.x, damping, max_iter - out.iterations, deadline,
-                                    stop, callback, tol, announce=False)
+                                    stop, callback, tol, announce=False, scale=out.scale)
     return replace(rest, iterations=out.iterations + rest.iterations)
 
 
@@ -1259,9 +1261,10 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                          deadline: float | None,
                          stop: Callable[[np.ndarray], bool] | None,
                          callback: Callable[[float, float], None] | None,
-                         tol: float, announce: bool = True) -> Outcome:
+                         tol: float, announce: bool = True,
+                         scale: float | None = None) -> Outcome:
     """:func:`levenberg_marquardt` on ``man`` (``announce``: the callback at the start
-    too)."""
+    too; ``scale``: the optimality error's, None: from the first gradient)."""
     nlp = man.nlp
     start = nlp.project(np.asarray(x, dtype=float))
     p = None if start is None else man.point(start)
@@ -1274,7 +1277,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
     lam, nu, it = float(damping), 2.0, 0
     B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
-    augmented, scale, error, last, kept = False, None, None, None, None
+    augmented, error, last, kept = False, None, None, None
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
         lin = m = None  # the last point's derivatives go before the next are built
@@ -1336,7 +1339,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
             status = "Fit_Reached"
             break
     return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
-                   kkt_error=error)
+                   kkt_error=error, scale=scale)
 
 
 @functools.cache

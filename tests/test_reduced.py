@@ -331,14 +331,24 @@ def test_the_pass_in_a_coarse_basis_is_the_whole_designs_times_the_basis(monkeyp
 
 def test_a_run_in_a_coarse_basis_goes_on_in_the_whole_design_to_its_optimum(monkeypatch):
     """Optimal in the coarse basis, the run is refined once and ends at the whole design's
-    optimum (that of a run without the basis), every accepted step logged once; with a fit
-    reached in the coarse basis it is not refined."""
+    optimum (that of a run without the basis), its optimality error scaled as the first
+    run's, every accepted step logged once; with a fit reached in the coarse basis it is not
+    refined."""
     prob, opts = small("quarter_vase", panels=(16, 16))
     refined, refine = [], reduced.Manifold.refine
     monkeypatch.setattr(reduced.Manifold, "refine",
                         lambda self: refined.append(self.basis.shape) or refine(self))
+    runs, run = [], reduced._levenberg_marquardt
+
+    def logged(*args, **kw):
+        out = run(*args, **kw)
+        runs.append((kw.get("scale"), out.scale))
+        return out
+
+    monkeypatch.setattr(reduced, "_levenberg_marquardt", logged)
     coarse = prob.solve(replace(opts, boundary_knots=3))
     assert len(refined) == 1 and refined[0][1] < refined[0][0]
+    assert len(runs) == 2 and runs[0][0] is None and runs[1] == (runs[0][1], runs[0][1])
     whole = prob.solve(replace(opts, boundary_knots=0))
     assert len(refined) == 1
     assert coarse.stats.status == whole.stats.status == "Solve_Succeeded"
