@@ -82,7 +82,7 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 from threadpoolctl import ThreadpoolController
 
 from .errors import InputError
-from .stencils import Lift, LiftedJacobian, index_array
+from .stencils import Lift, LiftedJacobian, Structure, index_array
 from .transcription import NLP
 
 #: constraint violation up to which a marched design counts as admissible
@@ -221,17 +221,16 @@ class _Buffered:
 
 
 class _Sliced:
-    """A fixed submatrix of a sparse Jacobian, refilled from the Jacobian's nonzeros."""
+    """A fixed submatrix of a sparse Jacobian (``block``, data = 1 + the index of each
+    nonzero in the Jacobian's), refilled from the Jacobian's nonzeros; its sparsity kept
+    without values (:class:`rffqm_nlp.stencils.Structure`)."""
 
-    def __init__(self, block: sp.spmatrix, fmt: str = "csr"):
-        self.matrix = block.asformat(fmt, copy=True)
-        self.matrix.sort_indices()
-        self._index = self.matrix.data.astype(np.int64) - 1
+    def __init__(self, block: sp.spmatrix):
+        self._structure, self._index = Structure.of_pattern(block, "csr")
 
-    def __call__(self, nonzeros: np.ndarray) -> sp.spmatrix:
+    def __call__(self, nonzeros: np.ndarray) -> sp.csr_matrix:
         """The block with the values ``nonzeros`` (its structure shared, not copied)."""
-        m = self.matrix
-        return type(m)((nonzeros[self._index], m.indices, m.indptr), shape=m.shape)
+        return self._structure.with_values(nonzeros[self._index])
 
 
 class _Levels:

@@ -173,7 +173,7 @@ class LocalJacobian:
         self._position = index_array(position)  # as long as the instances' nonzeros
         del position
         col, row = np.divmod(key, n_g)  # key is sorted: the CSC order
-        self._structure = _Structure(index_array(row), np.searchsorted(
+        self._structure = Structure(index_array(row), np.searchsorted(
             col, np.arange(self.shape[1] + 1)), self.shape)
         self._mapped = mapped
         return mapped
@@ -193,7 +193,7 @@ class LocalJacobian:
 
 
 @dataclass(frozen=True)
-class _Structure:
+class Structure:
     """A CSC (or ``fmt`` "csr") sparsity (``indices``, ``indptr``, ``shape``) kept without
     its values: a large Jacobian's pattern as :meth:`pattern` gives it costs 8 bytes a
     nonzero more."""
@@ -212,6 +212,17 @@ class _Structure:
         arrays."""
         kind = sp.csr_matrix if self.fmt == "csr" else sp.csc_matrix
         return kind((data, self.indices, self.indptr), shape=self.shape)
+
+    @classmethod
+    def of_pattern(cls, pattern: sp.spmatrix, fmt: str = "csc") -> tuple["Structure", np.ndarray]:
+        """The sparsity of ``pattern`` (data = 1 + the index of each nonzero in some
+        values, as :meth:`pattern` and :meth:`LocalJacobian.pattern` give it) in ``fmt``
+        with sorted indices, and the index in those values of each of its nonzeros (as
+        :func:`index_array` makes it): ``with_values(values[index])`` is the matrix at
+        ``values``."""
+        m = pattern.asformat(fmt, copy=True)
+        m.sort_indices()
+        return cls(m.indices, m.indptr, m.shape, fmt), index_array(m.data - 1)
 
     def pattern(self) -> sp.spmatrix:
         """The sparsity (a new matrix), data = 1 + the index of each nonzero."""
@@ -272,16 +283,10 @@ class LiftedJacobian:
             return
         n_x = self.shape[1]
         F = self.inner.pattern()  # data = 1 + the index in the inner Jacobian's nonzeros
-        Fx = F[:, :n_x].tocsc()
-        Fx.sort_indices()
-        self._x_index = index_array(Fx.data - 1)
-        self._structure = _Structure(Fx.indices, Fx.indptr, Fx.shape)
+        self._structure, self._x_index = Structure.of_pattern(F[:, :n_x])
         Fu = F[:, n_x:].tocsr()
         self._lifted_rows = np.flatnonzero(np.diff(Fu.indptr))
-        Fu = Fu[self._lifted_rows]
-        Fu.sort_indices()
-        self._Fu_index = index_array(Fu.data - 1)
-        self._Fu = _Structure(Fu.indices, Fu.indptr, Fu.shape, "csr")  # values per point
+        self._Fu, self._Fu_index = Structure.of_pattern(Fu[self._lifted_rows], "csr")
         self._built = True
 
     def pattern(self) -> sp.csc_matrix:
