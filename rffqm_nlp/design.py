@@ -790,8 +790,8 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     if options.solver == LM:
         design = 3.0 * (P + Q)
         if options.stop_rms is not None and options.boundary_knots:
-            k = options.boundary_knots
-            design = min(design, 6.0 * (min(k, P / 2) + min(k, Q / 2)))
+            knots = options.boundary_knots
+            design = min(design, 6.0 * (min(knots, P / 2) + min(knots, Q / 2)))
         per_panel = MEMORY_PER_PANEL[LM]
         if problem.correspondence == "free":
             k = transcription.GRID_CONTROLS

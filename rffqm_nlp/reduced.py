@@ -100,7 +100,7 @@ WHOLE_S = 1 << 20
 #: as long as their nonzeros instead of three as long as all of W's)
 REFILL_ROWS = 1 << 16
 #: rows of a level computed at once in the pass (:class:`_Window`): their product with
-#: the working set, CHUNK_ROWS x n_d, is the pass's largest temporary
+#: the working set, CHUNK_ROWS x n_u, is the pass's largest temporary
 CHUNK_ROWS = 1024
 #: rows gathered before one update of J' J or of the metric (:class:`_Gram`), and of one
 #: band's range of columns of them
@@ -1052,12 +1052,12 @@ def _postponed(level: np.ndarray, deps: sp.csr_matrix, users: sp.csr_matrix) -> 
 
 @dataclass
 class _Model:
-    """The Gauss-Newton model of the reduced problem at a point: JtJ = Jr' Jr (Jr the
-    reduced Jacobian, n_r x n_d, never formed), H = JtJ + B, the metric M (n_d, n_d), the
-    gradient Jr' r (n_d,), and its inequalities: rows = g's inequality rows, then the
-    bounded design, then the bounded state variables, each with its bounds minus its
-    current value; ``known``: the rows of A (n_d,) by index swept back so far
-    (:meth:`_Steps.rows`)."""
+    """The Gauss-Newton model of the reduced problem at a point, in the basis' coordinates
+    u: JtJ = Jr' Jr (Jr the reduced Jacobian, n_r x n_u, never formed), H = JtJ + B, the
+    metric M (n_u, n_u), the gradient Jr' r (n_u,), and its inequalities: rows = g's
+    inequality rows, then the bounded design, then the bounded state variables, each with
+    its bounds minus its current value; ``known``: the rows of A (n_u,) by index swept back
+    so far (:meth:`_Steps.rows`)."""
 
     JtJ: np.ndarray
     H: np.ndarray
@@ -1071,7 +1071,7 @@ class _Model:
 
 def _model(man: Manifold, p: _Point, lin: _Linearization,
            M: np.ndarray | None = None) -> _Model:
-    """The model at p; its metric from ``lin``, or ``M`` (n_d, n_d) where ``lin`` has
+    """The model at p; its metric from ``lin``, or ``M`` (n_u, n_u) where ``lin`` has
     none (linearised without it)."""
     if lin.pattern_metric is not None:
         M = lin.pattern_metric + man.design_metric.toarray()
@@ -1109,7 +1109,7 @@ class _Steps:
                                ds[self.man.bounded_state]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
-        """The dense rows ``which`` of A (which.size, n_d), each swept back once per model
+        """The dense rows ``which`` of A (which.size, n_u), each swept back once per model
         (the QP rounds, the optimality test and the secant update ask for the same rows)."""
         new = np.array([i for i in which.tolist() if i not in m.known], dtype=np.int64)
         if new.size:
