@@ -45,7 +45,8 @@ d + dd and accepts it if the loss falls and every constraint holds; a step that 
 constraint is corrected (the rows shifted by their linearisation error, up to
 :data:`CORRECTIONS` times) before lam grows. lam follows
 Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least squares
-problems", 2004, s.3.2). The metric M counts the change of the crease pattern: D_d plus
+problems", 2004, s.3.2), except after a step whose pattern does not march (a side or a
+sector angle out of its range), which only doubles it (:data:`DOMAIN_DAMPING`). The metric M counts the change of the crease pattern: D_d plus
 S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
 lattice point); where lam is below :data:`METRIC_DAMPING` the last point's M serves (lam M
@@ -89,6 +90,11 @@ from .transcription import NLP
 FEASIBLE = 1e-9
 #: corrections of a step that breaks a constraint before the damping grows
 CORRECTIONS = 3
+#: factor of lam after a step that leaves the march's domain (a side or sector angle of
+#: the re-marched pattern out of its range): unlike a step whose loss rises, it says
+#: nothing of the model's quality, so Nielsen's growing factor is not applied; the first
+#: step from a large Miura start leaves it for several lam (docs/solvers.md)
+DOMAIN_DAMPING = 2.0
 #: damping above which no step is found: the run stops with status "Stalled"
 MAX_DAMPING = 1e10
 #: entries (rows x state) of a block of rows swept back at once (:meth:`_Steps.rows`)
@@ -1318,7 +1324,10 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                     shift += _linearization_error(man, m, steps, dd, p, trial)
                     corrections += 1
                     continue
-            lam, nu = lam * nu, 2 * nu
+            if step is not None and predicted > 0 and xt is None:  # left the march's domain
+                lam *= DOMAIN_DAMPING
+            else:
+                lam, nu = lam * nu, 2 * nu
             shift[:], corrections = 0.0, 0
         else:
             status = "Stalled"

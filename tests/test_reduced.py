@@ -453,6 +453,35 @@ def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
             assert a is b
 
 
+@pytest.mark.parametrize("leaves", [True, False])
+def test_a_step_that_leaves_the_marchs_domain_doubles_the_damping(manifold, monkeypatch,
+                                                                     leaves):
+    """A trial point that does not march (project gives None) doubles lam and keeps Nielsen's
+    factor; a trial whose loss rises multiplies lam by that factor, which doubles each time
+    (2, 4, 8): from 0.03, three failed trials then 0.24 against 1.92."""
+    prob, man = manifold
+    nlp, seen, trials = man.nlp, [], []
+    project, point, steps = nlp.project, man.point, reduced._Steps.__call__
+    monkeypatch.setattr(reduced._Steps, "__call__",
+                        lambda self, m, lam, shift: (seen.append(lam), steps(self, m, lam,
+                                                                           shift))[1])
+
+    def failing(x):  # the start, then three trials that fail, then the rest as they are
+        trials.append(x)
+        return None if leaves and 1 < len(trials) <= 4 else project(x)
+
+    def rising(x):
+        p = point(x)
+        return replace(p, r=10 * p.r) if not leaves and 1 < len(trials) <= 4 else p
+
+    monkeypatch.setattr(nlp, "project", failing)
+    monkeypatch.setattr(man, "point", rising)
+    out = reduced.levenberg_marquardt(nlp, nlp.x0, 0.03, 1, manifold=man)
+    assert out.iterations == 1 and len(trials) >= 5
+    assert seen[:4] == pytest.approx([0.03, 0.06, 0.12, 0.24] if leaves
+                                     else [0.03, 0.06, 0.24, 1.92], rel=1e-12)
+
+
 def _blas_threads() -> set[int]:
     return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
 
