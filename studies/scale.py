@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, export_package, fmt,
@@ -33,10 +34,12 @@ def run(target: str, n: int, stop_rms: float, time_limit: float,
         package: Path | None, overrides: dict) -> dict:
     """One solve in a fresh process (``package``: the exported code of an earlier
     revision, None for this one; ``overrides``: [design] keys); refused without running when
-    this revision's :func:`rffqm_nlp.design.check_memory` refuses it."""
+    this revision's :func:`rffqm_nlp.design.check_memory` refuses it with the child's
+    options (the target file's, stopping at ``stop_rms``)."""
     if package is None:
+        problem, options = target_problem(target, n, **overrides)
         try:
-            design.check_memory(*target_problem(target, n, **overrides))
+            design.check_memory(problem, replace(options, stop_rms=stop_rms))
         except InputError as exc:
             return {"n": n, "status": f"refused: {one_line(exc)}", "wall": None,
                     "peak_rss_mb": None}
