@@ -207,6 +207,53 @@ def perturb_angles(bd: BoundaryData, amplitude: float = 0.05 * np.pi,
     return BoundaryData(left, bottom, bd.l_left, bd.l_bottom)
 
 
+def refine(design: BoundaryData, reference: BoundaryData,
+           finer: BoundaryData) -> BoundaryData:
+    """The boundary data of the Miura-ori ``finer`` carrying ``design``, a pattern designed
+    from the Miura-ori ``reference`` of its own size, N x M panels, to finer's N_f x M_f
+    (N_f >= N, M_f >= M; coarse-to-fine, docs/solvers.md).
+
+    Along each edge, each class (alpha, beta or the sides; one parity of the index, as a
+    Miura-ori alternates) is interpolated linearly at the same place along the edge (vertex
+    i at i / N, a side at its middle): the angles' deviations from ``reference`` scaled by
+    the ratio of the panels along that edge (N / N_f on the left edge, M / M_f on the bottom
+    one), the sides as ratios to ``reference``'s; the mountain-valley signs are finer's.
+    Unscaled deviations add up over r times the panels and do not march; scaled, the start
+    lies closest to the coarse design's shape among the factors measured in docs/solvers.md.
+    Raises :class:`InputError` unless both Miuras have design's layout and finer is at least
+    as large, :class:`BoundaryDataError` where a carried vertex leaves the admissible set.
+    """
+    N, M, N_f, M_f = design.N, design.M, finer.N, finer.M
+    if (reference.N, reference.M) != (N, M) or N_f < N or M_f < M:
+        raise InputError(f"refine carries a design of N x M panels to N_f x M_f >= N x M with "
+                         f"a reference of N x M, got the design {N} x {M}, the reference "
+                         f"{reference.N} x {reference.M} and the finer Miura {N_f} x {M_f}")
+    if not (np.array_equal(design.sigma[:2], reference.sigma[:2])
+            and np.array_equal(reference.sigma[:2], finer.sigma[:2])):
+        raise InputError("refine needs the design, its reference and the finer Miura-ori in "
+                         "one layout (the same mountain-valley signs at the corner)")
+    left, bottom = finer.left.copy(), finer.bottom.copy()
+    for edge, (ours, ref, out, n, n_f, first) in enumerate(
+            [(design.left, reference.left, left, N, N_f, 0),
+             (design.bottom, reference.bottom, bottom, M, M_f, 1)]):
+        for col in (0, 1):
+            out[:, col] += (n / n_f) * _carried(ours[:, col] - ref[:, col], n, n_f,
+                                                out.shape[0], first)
+    l_left = finer.l_left * _carried(design.l_left / reference.l_left, N, N_f, N_f, 0.5)
+    l_bottom = finer.l_bottom * _carried(design.l_bottom / reference.l_bottom, M, M_f, M_f, 0.5)
+    return BoundaryData(left, bottom, l_left, l_bottom)
+
+
+def _carried(values: np.ndarray, n: int, n_f: int, size: int, first: float) -> np.ndarray:
+    """``values`` (k,) along an edge of n panels, entry k at (k + first) / n, interpolated
+    per parity of k at the ``size`` places (k + first) / n_f of an edge of n_f panels."""
+    out = np.empty(size)
+    for parity in (0, 1):
+        ours, theirs = np.arange(parity, values.size, 2), np.arange(parity, size, 2)
+        out[theirs] = np.interp((theirs + first) / n_f, (ours + first) / n, values[ours])
+    return out
+
+
 def _check_size(N, M) -> tuple[int, int]:
     for name, val in (("N", N), ("M", M)):
         if int(val) != val or val < 1:

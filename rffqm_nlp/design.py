@@ -24,11 +24,11 @@ import casadi as ca
 import numpy as np
 
 from . import clearance, memory, numpy_model, reduced, shape, surfaces, transcription
-from .boundary import LAYOUTS, BoundaryData, miura_boundary
+from .boundary import LAYOUTS, BoundaryData, miura_boundary, refine
 from .collisions import collisions
 from .curvature import curvature_maps
-from .errors import (InfeasibleDesign, InputError, MarchingError, SolverFailed, one_line,
-                     raise_for_ipopt)
+from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
+                     SolverFailed, one_line, raise_for_ipopt)
 from .files import (Key, check_table, check_value, describe_value, key_name, read_toml,
                     unknown_key)
 from .pattern import Pattern
@@ -349,22 +349,17 @@ class DesignProblem:
         """The NLP of this problem in the transcription of ``options`` (default
         :class:`SolveOptions`: the simultaneous one).
 
-        ``weights`` override the problem's; ``initial`` (a result of a problem of the same
-        size, in either transcription) replaces the Miura as the initial guess, while the
-        Miura stays the Tikhonov reference and fixes the mountain-valley pattern; with a
-        free correspondence, its map too when it was solved with one on the same domain
-        (:meth:`_initial_controls`).
+        ``weights`` override the problem's; ``initial`` (a result of this problem, in
+        either transcription, at these panels or fewer: :meth:`carried`) replaces the Miura
+        as the initial guess, while the Miura stays the Tikhonov reference and fixes the
+        mountain-valley pattern; with a free correspondence, its map too when it was solved
+        with one on the same domain (:meth:`_initial_controls`).
         """
         start = start or self.start()
         guess, corr = start, self._correspondence()
         controls = None
         if initial is not None:
-            if initial.boundary.N != 2 * self.N or initial.boundary.M != 2 * self.M:
-                raise InputError(f"the initial guess has {initial.boundary.N} x "
-                                 f"{initial.boundary.M} panels, the problem {self.panels}")
-            guess = Start(boundary=initial.boundary, omega=initial.omega,
-                          target_points=start.target_points, spacing=start.spacing,
-                          rotation=initial.rotation, translation=initial.translation)
+            guess = self.carried(initial, start)
             controls = self._initial_controls(initial, corr)
         setup = transcription.Setup(
             boundary=guess.boundary, omega=guess.omega, rotation=guess.rotation,
@@ -374,6 +369,41 @@ class DesignProblem:
             omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
             reference_omega=start.omega, correspondence=corr, controls=controls)
         return getattr(transcription, (options or SolveOptions()).transcription)(setup)
+
+    def carried(self, initial: DesignResult, start: Start | None = None) -> Start:
+        """``initial``, a result of this problem at these panels or fewer, as a start of
+        this problem: as it is at the same panels; from fewer, its boundary data carried to
+        these panels (:func:`rffqm_nlp.boundary.refine`, coarse-to-fine) with its omega, and
+        aligned to the target lattice anew. ``start``: this problem's (default
+        :meth:`start`). Raises :class:`InputError` when ``initial`` has more panels, another
+        layout, alpha0 or omega0, or when its carried pattern does not march."""
+        start = start or self.start()
+        n, m = initial.boundary.N, initial.boundary.M
+        if (n, m) == self.panels:
+            return replace(start, boundary=initial.boundary, omega=initial.omega,
+                           rotation=initial.rotation, translation=initial.translation)
+        if n > self.panels[0] or m > self.panels[1]:
+            raise InputError(f"the initial guess has {n} x {m} panels, more than the problem's "
+                             f"{self.panels[0]} x {self.panels[1]}: give a result of as many "
+                             f"panels or fewer")
+        theirs = initial.problem.get("design", {})
+        for name in ("layout", "alpha0", "omega0"):
+            if name in theirs and theirs[name] != getattr(self, name):
+                raise InputError(f"the initial guess of {n} x {m} panels has [design] {name} "
+                                 f"= {theirs[name]!r}, the problem {getattr(self, name)!r}: "
+                                 f"a coarser design is carried over from the same Miura-ori")
+        reference = replace(self, panels=(n, m)).start().boundary
+        try:
+            boundary = refine(initial.boundary, reference, start.boundary)
+            lattice = shape.coarse_grain(numpy_model.fold(numpy_model.march(boundary),
+                                                          initial.omega))
+        except (BoundaryDataError, MarchingError) as exc:
+            raise InputError(f"the initial guess of {n} x {m} panels, carried to "
+                             f"{self.panels[0]} x {self.panels[1]}, does not march: "
+                             f"{one_line(exc)}") from exc
+        R, t, _ = shape.kabsch(lattice, start.target_points)
+        return replace(start, boundary=boundary, omega=initial.omega, rotation=R,
+                       translation=t)
 
     def _initial_controls(self, initial: DesignResult,
                           corr: transcription.Correspondence | None) -> np.ndarray | None:
@@ -418,9 +448,10 @@ class DesignProblem:
 
         ``callback`` receives {"iter", "objective", "inf_pr", "elapsed"} every iteration
         ("elapsed": seconds since the solve started).
-        ``warm_start``: a result of a problem of the same size to start from instead of the
-        Miura (the Miura stays the Tikhonov reference and the mountain-valley pattern; a
-        free correspondence's map is kept, see :meth:`transcribe`).
+        ``warm_start``: a result of this problem at these panels or fewer to start from
+        instead of the Miura (a coarser design carried to these panels, coarse-to-fine:
+        :meth:`carried`; the Miura stays the Tikhonov reference and the mountain-valley
+        pattern; a free correspondence's map is kept, see :meth:`transcribe`).
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
         Raises :class:`InputError` before any work when the solve needs more memory than

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import design, numpy_model, surfaces, transcription
+from rffqm_nlp import boundary, design, numpy_model, shape, surfaces, transcription
 from rffqm_nlp import vertex as vx
 from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.results import DesignResult
@@ -91,8 +91,114 @@ def test_warm_start_from_a_solution_returns_to_it(solved):
     # The loss is flat near its minimisers: IPOPT stops within 1% of the first objective.
     assert again.stats.objective == pytest.approx(res.stats.objective, rel=1e-2)
     assert again.stats.iterations < res.stats.iterations
-    with pytest.raises(rq.InputError, match="panels"):
-        replace(prob, panels=(10, 10)).transcribe(initial=res, options=opts)
+    with pytest.raises(rq.InputError, match="more than the problem's 6 x 6"):
+        replace(prob, panels=(6, 6)).transcribe(initial=res, options=opts)
+
+
+def within(t: np.ndarray, places: np.ndarray) -> np.ndarray:
+    """Which of the finer places t (k,) lie between the coarse places of their parity
+    (refine interpolates there and holds the ends beyond them)."""
+    parity, inside = np.arange(t.size) % 2, np.zeros(t.size, dtype=bool)
+    for p in (0, 1):
+        ours = places[p::2]
+        inside |= (parity == p) & (t >= ours.min() - 1e-15) & (t <= ours.max() + 1e-15)
+    return inside
+
+
+@pytest.mark.parametrize("layout", ["zigzag_i", "zigzag_j"])
+@pytest.mark.parametrize("coarse, fine", [((6, 8), (6, 8)), ((6, 8), (12, 16)),
+                                          ((4, 6), (12, 10))])
+def test_refine_carries_deviations_linear_along_each_edge(layout, coarse, fine):
+    """Deviations from the Miura linear in the place along the edge, per class, come out
+    as the same lines at the finer places, the angles' scaled by the ratio of the panels
+    along their edge, the sides' ratios as they are; the Miura carries to the finer Miura,
+    and at the same size refine gives the design back."""
+    ref = boundary.miura_boundary(*coarse, 1.0, 0.7, 1.1, layout)
+    finer = boundary.miura_boundary(*fine, 0.5, 0.35, 1.1, layout)
+    line = lambda t, parity, a, b: a + b * t + 0.01 * parity  # one line a class
+    place = {"left": np.arange(coarse[0] + 1) / coarse[0],
+             "bottom": (np.arange(coarse[1]) + 1) / coarse[1]}
+    deviation = {e: np.stack([line(t, np.arange(t.size) % 2, 0.01 * (c + 1), 0.02 * (1 - 2 * c))
+                              for c in (0, 1)], axis=1) for e, t in place.items()}
+    sides = {e: line((np.arange(n) + 0.5) / n, np.arange(n) % 2, 1.0, 0.1 * (k + 1))
+             for k, (e, n) in enumerate([("l_left", coarse[0]), ("l_bottom", coarse[1])])}
+    left, bottom = ref.left.copy(), ref.bottom.copy()
+    left[:, :2] += deviation["left"]
+    bottom[:, :2] += deviation["bottom"]
+    design = rq.BoundaryData(left, bottom, ref.l_left * sides["l_left"],
+                             ref.l_bottom * sides["l_bottom"])
+    out = boundary.refine(design, ref, finer)
+    for edge, n, n_f, first in (("left", coarse[0], fine[0], 0), ("bottom", coarse[1], fine[1], 1)):
+        t = (np.arange(getattr(finer, edge).shape[0]) + first) / n_f
+        expected = np.stack([line(t, np.arange(t.size) % 2, 0.01 * (c + 1), 0.02 * (1 - 2 * c))
+                             for c in (0, 1)], axis=1) * n / n_f
+        inside = within(t, (np.arange(getattr(design, edge).shape[0]) + first) / n)
+        np.testing.assert_allclose((getattr(out, edge)[:, :2] - getattr(finer, edge)[:, :2])[inside],
+                                   expected[inside], atol=1e-14)
+        np.testing.assert_array_equal(getattr(out, edge)[:, 2], getattr(finer, edge)[:, 2])
+    for k, (name, n, n_f) in enumerate([("l_left", coarse[0], fine[0]),
+                                        ("l_bottom", coarse[1], fine[1])]):
+        t = (np.arange(n_f) + 0.5) / n_f
+        inside = within(t, (np.arange(n) + 0.5) / n)
+        np.testing.assert_allclose((getattr(out, name) / getattr(finer, name))[inside],
+                                   line(t, np.arange(n_f) % 2, 1.0, 0.1 * (k + 1))[inside],
+                                   rtol=1e-14)
+    miura = boundary.refine(ref, ref, finer)
+    for name in ("left", "bottom", "l_left", "l_bottom"):
+        np.testing.assert_allclose(getattr(miura, name), getattr(finer, name), rtol=1e-15)
+        if coarse == fine:
+            np.testing.assert_allclose(getattr(boundary.refine(design, ref, ref), name),
+                                       getattr(design, name), rtol=1e-15)
+
+
+def test_refine_refuses_a_smaller_pattern_or_another_layout():
+    ref = boundary.miura_boundary(8, 8, 1.0, 1.0, 1.1, "zigzag_i")
+    with pytest.raises(rq.InputError, match="N_f x M_f >= N x M"):
+        boundary.refine(ref, ref, boundary.miura_boundary(6, 8, 1.0, 1.0, 1.1, "zigzag_i"))
+    with pytest.raises(rq.InputError, match="one layout"):
+        boundary.refine(ref, ref, boundary.miura_boundary(16, 16, 1.0, 1.0, 1.1,
+                                                                "zigzag_j"))
+
+
+@pytest.fixture(scope="module")
+def coarse_sphere_cap():
+    prob, opts = small("sphere_cap", solver="levenberg-marquardt", stop_rms=0.009)
+    prob = replace(prob, panels=(20, 20))
+    return prob, opts, prob.solve(opts)
+
+
+def test_a_coarser_design_carried_over_starts_nearer_the_target(coarse_sphere_cap):
+    """A 20 x 20 design carried to 40 x 40 (coarse-to-fine) starts at a lower loss than
+    the Miura, marches, and the run from it reaches the fit; its alignment is the carried
+    pattern's own."""
+    prob, opts, coarse = coarse_sphere_cap
+    fine = replace(prob, panels=(40, 40))
+    start = fine.carried(coarse)
+    assert start.omega == coarse.omega and start.boundary.N == 40
+    lattice = shape.coarse_grain(numpy_model.fold(numpy_model.march(start.boundary),
+                                                     start.omega))
+    R, t, _ = shape.kabsch(lattice, start.target_points)
+    np.testing.assert_allclose(start.rotation, R, atol=1e-12)
+    np.testing.assert_allclose(start.translation, t, atol=1e-12)
+    miura, carried = (fine.solve(opts, warm_start=w) for w in (None, coarse))
+    assert carried.stats.status == miura.stats.status == "Fit_Reached"
+    assert carried.stats.history["objective"][0] < 0.5 * miura.stats.history["objective"][0]
+    assert carried.fit.rms <= 0.009
+
+
+def test_a_coarser_design_of_another_miura_or_that_does_not_march_is_refused(
+        coarse_sphere_cap, monkeypatch):
+    prob, opts, coarse = coarse_sphere_cap
+    with pytest.raises(rq.InputError, match="alpha0 = 1.1, the problem 1.2"):
+        replace(prob, panels=(40, 40), alpha0=1.2).carried(coarse)
+
+    def broken(*args):
+        raise rq.BoundaryDataError("alpha at vertex (3, 1) out of range", vertex=(3, 1),
+                                   value=4.0)
+
+    monkeypatch.setattr(design, "refine", broken)
+    with pytest.raises(rq.InputError, match="carried to 40 x 40, does not march: alpha"):
+        replace(prob, panels=(40, 40)).carried(coarse)
 
 
 def test_start_matches_target_spacing():
