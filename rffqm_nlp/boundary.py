@@ -233,9 +233,8 @@ def refine(design: BoundaryData, reference: BoundaryData,
         raise InputError("refine needs the design, its reference and the finer Miura-ori in "
                          "one layout (the same mountain-valley signs at the corner)")
     left, bottom = finer.left.copy(), finer.bottom.copy()
-    for edge, (ours, ref, out, n, n_f, first) in enumerate(
-            [(design.left, reference.left, left, N, N_f, 0),
-             (design.bottom, reference.bottom, bottom, M, M_f, 1)]):
+    for ours, ref, out, n, n_f, first in [(design.left, reference.left, left, N, N_f, 0),
+                                          (design.bottom, reference.bottom, bottom, M, M_f, 1)]:
         for col in (0, 1):
             out[:, col] += (n / n_f) * _carried(ours[:, col] - ref[:, col], n, n_f,
                                                 out.shape[0], first)

@@ -46,8 +46,9 @@ constraint is corrected (the rows shifted by their linearisation error, up to
 :data:`CORRECTIONS` times) before lam grows. lam follows
 Nielsen's rule (Madsen, Nielsen & Tingleff, "Methods for non-linear least squares
 problems", 2004, s.3.2), except after a step whose pattern does not march (a side or a
-sector angle out of its range), which only doubles it (:data:`DOMAIN_DAMPING`). The metric M counts the change of the crease pattern: D_d plus
-S_p' D_p S_p over the sector angles and sides p of every vertex, with D the weights of
+sector angle out of its range), which only doubles it (:data:`DOMAIN_DAMPING`). The
+metric M counts the change of the crease pattern: D_d plus S_p' D_p S_p over the sector
+angles and sides p of every vertex, with D the weights of
 :func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
 lattice point); where lam is below :data:`METRIC_DAMPING` the last point's M serves (lam M
 is then a small part of the model, and the pattern moves little a step). B estimates the
