@@ -63,9 +63,10 @@ at the optimum Gauss-Newton converges only linearly; B speeds up the end.
 
 The run stops with status "Solve_Succeeded" when the first-order optimality conditions of
 the reduced problem hold at a marched iterate (:func:`_kkt_error`): the gradient J' r
-less the linearised active inequalities' multipliers (those of the step's QP, of the right
-sign, zero where the inequality is not active) is at most ``tol`` in the max norm, relative
-to max(1, |J' r at the start| / 100) as IPOPT's gradient-based scaling of the objective.
+less the linearised active inequalities' multipliers (of the right sign, zero where the
+inequality is not active: the step's QP's, or their least-squares fit to the gradient where
+it does better) is at most ``tol`` in the max norm, relative to max(1, |J' r at the start|
+/ 100) as IPOPT's gradient-based scaling of the objective.
 """
 
 from __future__ import annotations
@@ -80,6 +81,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
+from scipy.optimize import nnls
 from scipy.sparse.csgraph import maximum_bipartite_matching
 from threadpoolctl import ThreadpoolController
 
@@ -1193,19 +1195,36 @@ class _Steps:
 
 
 def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:
-    """The first-order optimality error of the reduced problem at the model's point, with
-    the step's QP multipliers y (of the right sign by the QP's own conditions): max of
+    """The first-order optimality error of the reduced problem at the model's point: max of
     |grad + A_W' y| (stationarity) and of |y_i| times row i's distance to the bound it
-    holds (complementarity), A_W the QP's rows."""
-    residual = m.grad.copy()
+    holds (complementarity), A_W the rows active in the step's QP, with the better of two
+    multiplier estimates y of the right signs: the QP's own, and the least-squares ones
+    of :func:`_least_squares_multipliers` (the QP's lag by the damped step: grad + A_W' y
+    = -(H + lam M) dd)."""
     if step.which.size == 0:
-        return float(np.max(np.abs(residual)))
-    y = step.multipliers
-    residual += steps.rows(m, step.which).T @ y
-    lower_gap = np.minimum(-m.lower[step.which], 1e20)  # value - lower bound >= 0
-    upper_gap = np.minimum(m.upper[step.which], 1e20)
-    complementarity = np.maximum(np.maximum(-y, 0.0) * lower_gap, np.maximum(y, 0.0) * upper_gap)
-    return float(max(np.max(np.abs(residual)), np.max(complementarity)))
+        return float(np.max(np.abs(m.grad)))
+    active = step.multipliers != 0
+    which, y = step.which[active], step.multipliers[active]
+    A = steps.rows(m, which)
+    lower_gap = np.minimum(-m.lower[which], 1e20)  # value - lower bound >= 0
+    upper_gap = np.minimum(m.upper[which], 1e20)
+
+    def error(y: np.ndarray) -> float:
+        stationarity = np.max(np.abs(m.grad + A.T @ y))
+        complementarity = np.maximum(np.maximum(-y, 0.0) * lower_gap,
+                                     np.maximum(y, 0.0) * upper_gap)
+        return float(max(stationarity, np.max(complementarity, initial=0.0)))
+
+    return min(error(y), error(_least_squares_multipliers(A, m.grad, np.sign(y))))
+
+
+def _least_squares_multipliers(A: np.ndarray, grad: np.ndarray, sign: np.ndarray
+                               ) -> np.ndarray:
+    """The multipliers y (k,) of the rows A (k, n) with the signs ``sign`` (k,; CasADi's:
+    negative at a lower bound) that minimise |grad + A' y| (non-negative least squares in
+    sign * y)."""
+    z, _ = nnls(A.T * sign, -grad)
+    return sign * z
 
 
 def _secant_term(pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int
