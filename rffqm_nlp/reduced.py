@@ -173,8 +173,9 @@ class _Point:
 class _Linearization:
     """The derivatives at a point in the design's coordinates u (n_u, the manifold's
     ``basis`` B maps them to the design, dd = B du): the sparse Jacobians of r and g split
-    by design and state (n_s) columns (J_design, J_state; the inequality rows' G_design,
-    G_state; the design columns times B), S B with S = ds/dd there (``sensitivity``:
+    by design and state columns (J_design, J_state; the inequality rows' G_design,
+    G_state; the design columns times B, the state columns only the n_read that any of
+    them reads, :attr:`Manifold.read`), S B with S = ds/dd in those rows (``sensitivity``:
     applied to a block, and its transpose), and the reduced problem's J' J, J' r and the
     metric's B' S_p' D_p S_p B (n_u x n_u, n_u; the last None when linearised without
     it), accumulated level by level (:class:`_Window`) without storing S (unless it is
@@ -208,7 +209,8 @@ class _Linearization:
         return out
 
     def state_change(self, du: np.ndarray) -> np.ndarray:
-        """S B du (n_s,): the state's first-order change under the step du (n_u,)."""
+        """(S B du)[read] (n_read,): the first-order change of the state rows read
+        (:attr:`Manifold.read`) under the step du (n_u,)."""
         return self.sensitivity.forward(du)
 
 
@@ -325,34 +327,42 @@ class _Levels:
 
 @dataclass
 class _Sensitivity:
-    """S B (n_s x n_u) at a point, S = ds/dd and B the design's ``basis`` (n_d x n_u): by
-    the sweeps through the ``levels``, or by products with S B itself where the pass kept
-    it whole (``whole``, (n_s, n_m): its marching columns ``marching``, (n_m,); S B is zero
+    """S B at a point, S = ds/dd and B the design's ``basis`` (n_d x n_u), in the state
+    rows ``read`` (n_read,: those the residuals' Jacobian, the inequality rows and the
+    state bounds read, :attr:`Manifold.read`; no step needs the others): by the sweeps
+    through the ``levels``, or by products with those rows of S B where the pass kept it
+    whole (``whole``, (n_read, n_m): its marching columns ``marching``, (n_m,); S B is zero
     in the other, free, columns)."""
 
     levels: _Levels
     whole: np.ndarray | None
     marching: np.ndarray
     basis: sp.csr_matrix
+    read: np.ndarray
 
     def forward(self, X: np.ndarray) -> np.ndarray:
-        """S B X (n_s,) or (n_s, p) for X (n_u,) or (n_u, p)."""
+        """(S B X)[read] (n_read,) or (n_read, p) for X (n_u,) or (n_u, p)."""
         if self.whole is None:
-            return self.levels.forward(self.basis @ X)
+            return self.levels.forward(self.basis @ X)[self.read]
         return self.whole @ X[self.marching]
 
     def adjoint(self, Y: np.ndarray) -> np.ndarray:
-        """B' S' Y (n_u,) or (n_u, p) for Y (n_s,) or (n_s, p)."""
+        """B' S' Y (n_u,) or (n_u, p) for Y (n_read,) or (n_read, p) in the rows read."""
         if self.whole is None:
-            return self.basis.T @ self.levels.adjoint(Y)
+            Z = np.zeros((self.levels.n_s,) + Y.shape[1:])
+            Z[self.read] = Y
+            return self.basis.T @ self.levels.adjoint(Z)
         out = np.zeros((self.basis.shape[1],) + Y.shape[1:])
         out[self.marching] = self.whole.T @ Y
         return out
 
     def rows(self, R: sp.csr_matrix) -> np.ndarray:
-        """R S B (k, n_u) for the state rows R (k, n_s)."""
+        """R (S B)[read] (k, n_u) for R (k, n_read) in the rows read."""
         if self.whole is None:
-            return self.adjoint(R.T.toarray()).T
+            coo = R.tocoo()
+            Z = np.zeros((self.levels.n_s, R.shape[0]))
+            Z[self.read[coo.col], coo.row] = coo.data
+            return (self.basis.T @ self.levels.adjoint(Z)).T
         out = np.zeros((R.shape[0], self.basis.shape[1]))
         out[:, self.marching] = R @ self.whole
         return out
@@ -753,7 +763,11 @@ class Manifold:
     """The simultaneous NLP split into its design and its marched state.
 
     Built once per NLP: the index sets (``state`` in the order of the levels of the
-    marching equations), the levels, the CasADi Function of the residuals and constraints
+    marching equations; ``read``, the state rows that the residuals' Jacobian, the
+    inequality rows or the state bounds read, positions in ``state``, and
+    ``bounded_read``, the bounded state's positions in ``read``: a step needs S in those
+    rows only, about a third of them at 20 x 20 panels), the levels, the CasADi Function of
+    the residuals and constraints
     (trial points) and their Jacobians from local stencils (``nlp.r_jacobian``,
     ``nlp.g_jacobian``; accepted points). The steps are taken in the coordinates u of the
     design's ``basis`` B (n_d x n_u, dd = B du; :func:`boundary_basis` with ``knots``, the
@@ -866,11 +880,14 @@ class Manifold:
         marching equations by level (:class:`_Levels`); returns J's pattern for the pass
         (:meth:`_pooled`)."""
         J = self._jacobian_r.pattern().tocsr()  # with a lift, its direct part
-        self._J_design = _Sliced(J[:, self.design])
-        self._J_state = _Sliced(J[:, self.state])
         Gin = G[self.ineq]
+        self.read = np.union1d(np.union1d(J[:, self.state].indices, Gin[:, self.state].indices),
+                               self.bounded_state)
+        self.bounded_read = np.searchsorted(self.read, self.bounded_state)
+        self._J_design = _Sliced(J[:, self.design])
+        self._J_state = _Sliced(J[:, self.state[self.read]])
         self._G_design = _Sliced(Gin[:, self.design])
-        self._G_state = _Sliced(Gin[:, self.state])
+        self._G_state = _Sliced(Gin[:, self.state[self.read]])
         rows = self.eq[np.concatenate(self.levels)]  # in level order: row i owns unknown i
         Cs, Cd = G[rows][:, self.state].tocoo(), G[rows][:, self.design].tocsr()
         own = Cs.col == Cs.row
@@ -955,8 +972,9 @@ class Manifold:
             return None
         return _Linearization(J_design=self._J_design(J) @ self.basis,
                               J_state=self._J_state(J), G_design=G_design, G_state=G_state,
-                              sensitivity=_Sensitivity(self._sweeps, reduced[3],
-                                                       self._window.marching, self.basis),
+                              sensitivity=_Sensitivity(
+                                  self._sweeps, None if reduced[3] is None else reduced[3][self.read],
+                                  self._window.marching, self.basis, self.read),
                               JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],
                               lift=lift)
 
@@ -1115,7 +1133,7 @@ class _Steps:
         ds = m.lin.state_change(du)
         return np.concatenate([m.lin.G_design @ du + m.lin.G_state @ ds,
                                (self.man.basis @ du)[self.man.bounded_design],
-                               ds[self.man.bounded_state]])
+                               ds[self.man.bounded_read]])
 
     def rows(self, m: _Model, which: np.ndarray) -> np.ndarray:
         """The dense rows ``which`` of A (which.size, n_u), each swept back once per model
@@ -1140,8 +1158,8 @@ class _Steps:
         state = sp.vstack([lin.G_state[which[g_rows]],
                            sp.csr_matrix((np.ones(s_rows.size),
                                           (np.arange(s_rows.size),
-                                           man.bounded_state[which[s_rows] - ng - nbd])),
-                                         shape=(s_rows.size, man.state.size))], format="csr")
+                                           man.bounded_read[which[s_rows] - ng - nbd])),
+                                         shape=(s_rows.size, man.read.size))], format="csr")
         into = np.concatenate([g_rows, s_rows])
         block = max(1, BLOCK // (man.state.size + man.design.size))
         for k in range(0, into.size, block):

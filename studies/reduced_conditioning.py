@@ -41,13 +41,15 @@ CHECKPOINTS = (20, 50)
 def matrix_free_product(man: reduced.Manifold, lin, V: np.ndarray, lam: float) -> np.ndarray:
     """(J' J + lam M) V (n_d, p) for V (n_d, p) by one forward sweep (S V) and one adjoint
     sweep, M = D_d + S_p' D_p S_p (and a free correspondence's F_u H, its lift)."""
-    SV = lin.sensitivity.forward(V)
-    JV = lin.J_design @ V + lin.J_state @ SV
+    levels = lin.sensitivity.levels  # S in every state row (a step reads only ``read``)
+    SV = levels.forward(V)
+    JV = lin.J_design @ V + lin.J_state @ SV[man.read]
     if lin.lift is not None:
         JV[lin.lift.rows] += lin.lift.times(V)
-    Y = lin.J_state.T @ JV
+    Y = np.zeros_like(SV)
+    Y[man.read] = lin.J_state.T @ JV
     Y[man.pattern] += lam * man.pattern_weights[:, None] * SV[man.pattern]
-    out = lin.J_design.T @ JV + lin.sensitivity.adjoint(Y) + lam * man.design_metric @ V
+    out = lin.J_design.T @ JV + levels.adjoint(Y) + lam * man.design_metric @ V
     if lin.lift is not None:
         out[lin.lift.columns] += lin.lift.transpose_times(JV)
     return out

@@ -113,7 +113,8 @@ def test_sensitivity_and_reduced_jacobian_match_finite_differences_of_the_march(
     x = nlp.project(x)
     assert x is not None
     lin = man.linearize(man.point(x))
-    S = lin.state_change(np.eye(man.design.size))  # the forward sweep, column by column
+    S = _whole_sensitivity(lin, np.eye(man.design.size))
+    np.testing.assert_array_equal(lin.state_change(np.eye(man.design.size)), S[man.read])
     residuals = ca.Function("r", [nlp.x], [nlp.residuals])
     Jr = lin.jacobian_times(np.eye(man.design.size))
     h = 1e-6
@@ -199,7 +200,7 @@ def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, widt
     assert reduced._bands(window.marching.size).size > 3
     p = man.point(man.nlp.project(man.nlp.x0))
     lin = man.linearize(p)
-    S = lin.state_change(np.eye(man.design.size))[:, window.marching]  # the pool's columns
+    S = _whole_sensitivity(lin, np.eye(man.design.size))[:, window.marching]  # pool columns
     first, last = window._spans(lin.sensitivity.levels, window._design_span)
     columns = np.arange(S.shape[1])
     outside = (columns < first[:, None]) | (columns > last[:, None])
@@ -208,13 +209,19 @@ def test_the_level_pass_in_bands_matches_the_dense_sensitivity(monkeypatch, widt
     _assert_level_pass_matches_dense(man, 0)
 
 
+def _whole_sensitivity(lin, X: np.ndarray) -> np.ndarray:
+    """S B X in every state row (n_s, p), by the forward sweep (a step reads only the
+    rows ``read``)."""
+    return lin.sensitivity.levels.forward(lin.sensitivity.basis @ X)
+
+
 def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     nlp, rng = man.nlp, np.random.default_rng(seed)
     x = nlp.x0.copy()
     x[man.design] += 1e-3 * rng.standard_normal(man.design.size)
     p = man.point(nlp.project(x))
     lin = man.linearize(p)
-    S = lin.state_change(np.eye(man.design.size))
+    S = _whole_sensitivity(lin, np.eye(man.design.size))
     Jr = lin.jacobian_times(np.eye(man.design.size))
     Sp = S[man.pattern] * np.sqrt(man.pattern_weights)[:, None]
 
@@ -224,8 +231,9 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     close(lin.JtJ, Jr.T @ Jr)
     close(lin.grad, Jr.T @ p.r)
     close(lin.pattern_metric, Sp.T @ Sp)
-    Y = rng.standard_normal((man.state.size, 3))
-    close(lin.sensitivity.adjoint(Y), S.T @ Y)
+    close(lin.state_change(np.eye(man.design.size)), S[man.read])
+    Y = rng.standard_normal((man.read.size, 3))
+    close(lin.sensitivity.adjoint(Y), S[man.read].T @ Y)
     assert (lin.sensitivity.whole is not None) == man._window.whole
     w = rng.standard_normal(p.r.size)
     close(lin.jacobian_transpose(w), Jr.T @ w)
@@ -233,7 +241,7 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     steps = reduced._Steps(man)
     which = rng.choice(m.lower.size, 40, replace=False)
     ng, nbd = man.ineq.size, man.bounded_design.size
-    A = np.vstack([lin.G_design.toarray() + lin.G_state @ S,
+    A = np.vstack([lin.G_design.toarray() + lin.G_state @ S[man.read],
                    np.eye(man.design.size)[man.bounded_design], S[man.bounded_state]])
     assert ng + nbd + man.bounded_state.size == A.shape[0]
     close(steps.rows(m, which), A[which])
@@ -248,7 +256,7 @@ def _assert_level_pass_matches_dense(man: reduced.Manifold, seed: int) -> None:
     close(steps.change(m, dd), A @ dd)
     if man._window.whole:
         assert man._window.pool == man.state.size
-        close(lin.sensitivity.whole, S[:, man._window.marching])
+        close(lin.sensitivity.whole, S[man.read][:, man._window.marching])
     else:
         assert man._window.pool < man.state.size
     bare = man.linearize(p, metric=False)  # the pass without the metric: the rest the same
@@ -312,7 +320,7 @@ def test_the_pass_in_a_coarse_basis_is_the_whole_designs_times_the_basis(monkeyp
 
     close(a.JtJ, B.T @ b.JtJ @ B)
     close(a.grad, B.T @ b.grad)
-    U, Y = rng.standard_normal((B.shape[1], 3)), rng.standard_normal((coarse.state.size, 3))
+    U, Y = rng.standard_normal((B.shape[1], 3)), rng.standard_normal((coarse.read.size, 3))
     close(a.state_change(U), b.state_change(B @ U))
     close(a.jacobian_times(U), b.jacobian_times(B @ U))
     close(a.sensitivity.adjoint(Y), B.T @ b.sensitivity.adjoint(Y))
@@ -325,7 +333,7 @@ def test_the_pass_in_a_coarse_basis_is_the_whole_designs_times_the_basis(monkeyp
     du = rng.standard_normal(B.shape[1])
     close(reduced._Steps(coarse).change(ma, du), reduced._Steps(full).change(mb, B @ du))
     window = coarse._window
-    S = a.state_change(np.eye(B.shape[1]))[:, window.marching]
+    S = _whole_sensitivity(a, np.eye(B.shape[1]))[:, window.marching]
     first, last = window._spans(a.sensitivity.levels, window._design_span)
     columns = np.arange(S.shape[1])
     assert np.all(S[(columns < first[:, None]) | (columns > last[:, None])] == 0)
