@@ -973,7 +973,8 @@ class Manifold:
         return _Linearization(J_design=self._J_design(J) @ self.basis,
                               J_state=self._J_state(J), G_design=G_design, G_state=G_state,
                               sensitivity=_Sensitivity(
-                                  self._sweeps, None if reduced[3] is None else reduced[3][self.read],
+                                  self._sweeps,
+                                  None if reduced[3] is None else reduced[3][self.read],
                                   self._window.marching, self.basis, self.read),
                               JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],
                               lift=lift)
@@ -1044,10 +1045,17 @@ def boundary_basis(klass: np.ndarray, position: np.ndarray, knots: int
 def _gathered(csr: sp.csr_matrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The column indices of ``rows`` of ``csr`` one after the other, and where each row's
     run starts in them (rows.size,)."""
+    at, counts = _positions(csr, rows)
+    return csr.indices[at], np.cumsum(counts) - counts
+
+
+def _positions(csr: sp.csr_matrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the nonzeros of ``rows`` of ``csr`` sit in its indices and data, one row
+    after the other (nnz,), and each row's count (rows.size,)."""
     starts, counts = csr.indptr[rows], np.diff(csr.indptr)[rows]
     ends = np.cumsum(counts)
-    return (csr.indices[np.repeat(starts - ends + counts, counts)
-                        + np.arange(ends[-1] if ends.size else 0)], ends - counts)
+    at = np.repeat(starts - ends + counts, counts) + np.arange(ends[-1] if ends.size else 0)
+    return at, counts
 
 
 def _postponed(level: np.ndarray, deps: sp.csr_matrix, users: sp.csr_matrix) -> np.ndarray:
@@ -1151,15 +1159,19 @@ class _Steps:
         ng, nbd = man.ineq.size, man.bounded_design.size
         A = np.zeros((which.size, man.basis.shape[1]))
         g_rows = np.flatnonzero(which < ng)
-        A[g_rows] = lin.G_design[which[g_rows]].toarray()
-        d_rows = (which >= ng) & (which < ng + nbd)
-        A[d_rows] = man.basis[man.bounded_design[which[d_rows] - ng]].toarray()
+        d_rows = np.flatnonzero((which >= ng) & (which < ng + nbd))
+        for into, matrix, rows in ((g_rows, lin.G_design, which[g_rows]),
+                                   (d_rows, man.basis, man.bounded_design[which[d_rows] - ng])):
+            at, counts = _positions(matrix, rows)  # the rows' nonzeros: no sparse slicing
+            np.add.at(A, (np.repeat(into, counts), matrix.indices[at]), matrix.data[at])
         s_rows = np.flatnonzero(which >= ng + nbd)
-        state = sp.vstack([lin.G_state[which[g_rows]],
-                           sp.csr_matrix((np.ones(s_rows.size),
-                                          (np.arange(s_rows.size),
-                                           man.bounded_read[which[s_rows] - ng - nbd])),
-                                         shape=(s_rows.size, man.read.size))], format="csr")
+        at, counts = _positions(lin.G_state, which[g_rows])
+        # the state rows' part (the g rows' G_state, then a unit row per bounded state row)
+        state = sp.csr_matrix(
+            (np.concatenate([lin.G_state.data[at], np.ones(s_rows.size)]),
+             np.concatenate([lin.G_state.indices[at], man.bounded_read[which[s_rows] - ng - nbd]]),
+             np.concatenate([[0], np.cumsum(counts), at.size + np.arange(1, s_rows.size + 1)])),
+            shape=(g_rows.size + s_rows.size, man.read.size))
         into = np.concatenate([g_rows, s_rows])
         block = max(1, BLOCK // (man.state.size + man.design.size))
         for k in range(0, into.size, block):
