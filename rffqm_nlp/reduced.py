@@ -376,8 +376,9 @@ class _Window:
     level that uses it: the marching equations of a later level, or a residual row, which
     is reduced at the level of its latest state unknown (residual rows that use no state
     come first). A slot freed is reused by a later level, except where S B has at most
-    :data:`WHOLE_S` entries (``whole``): then every state row keeps its own slot, and the
-    pass gives S B. The pool's columns are the design's coordinates u (``basis`` B, n_d x
+    :data:`WHOLE_S` entries (``whole``): then every state row keeps its own slot, the
+    residual rows are reduced at once after the last level (one product instead of one a
+    level), and the pass gives S B. The pool's columns are the design's coordinates u (``basis`` B, n_d x
     n_u: dd = B du, :func:`boundary_basis`) that the march reads (``marching``, n_m of them:
     the boundary data, omega and the rigid alignment), and its first rows B's rows of the
     design variables the march reads; the lifted design variables (``free``, in u, n_f: a
@@ -429,6 +430,8 @@ class _Window:
         n_m = self.marching.size
         self.whole = n_s * n_m <= WHOLE_S
         slot = np.arange(n_s) if self.whole else self._slots(levels.bounds, last)
+        if self.whole:  # no row of S leaves the pool: the residual rows reduced at once, last
+            at[:] = len(levels.bounds) - 1
         self.pool = int(slot.max()) + 1 if n_s else 0
         self.mid = int(np.sum(position[self.marching] < 0))  # the first column at the corner
         read = np.setdiff1d(np.arange(n_d), free)  # the design the march reads
@@ -439,7 +442,6 @@ class _Window:
         free_column = np.full(n_d, -1, dtype=np.int64)
         free_column[free] = np.arange(free.size)
         width = read.size + self.pool
-        self._slot = slot
         span = self._spans(levels, self._design_span)
         edges = _bands(n_m)
         # residual rows by level, in the order of their bands: (rows, their part in the
@@ -474,10 +476,12 @@ class _Window:
         counts = [int(is_pattern[lo:hi].sum()) for lo, hi in levels.bounds]
         if any(not is_pattern[lo:lo + k].all() for (lo, _), k in zip(levels.bounds, counts)):
             raise RuntimeError("the metric's rows of a level do not come first")
-        # per level, its chunks of at most CHUNK_ROWS rows: (lo, hi, W_k's rows lo:hi in the
-        # pool's columns, the metric's rows among them: their number k (the first k), their
-        # order by band (None: as they are), their roots of D in that order (k, 1) and
-        # their segments (a, b, start, stop))
+        # per level, its chunks of at most CHUNK_ROWS rows lo:hi: (their pool rows: a slice
+        # where S is whole, else their slots; W_k's rows lo:hi in the pool's columns, the
+        # metric's rows among them: their number k (the first k), their order by band
+        # (None: as they are), their roots of D in that order (k, 1) and their segments
+        # (a, b, start, stop))
+        top = self._top.shape[0]
         self._chunks = []
         for (lo, hi), count in zip(levels.bounds, counts):
             chunks = []
@@ -489,7 +493,8 @@ class _Window:
                 if np.array_equal(perm, np.arange(k)):
                     perm = None
                 mine = np.arange(a, a + k) if perm is None else a + perm
-                chunks.append((a, b, levels.block(a, b, column[W.indices[W.indptr[a]:
+                into = slice(top + a, top + b) if self.whole else top + slot[a:b]
+                chunks.append((into, levels.block(a, b, column[W.indices[W.indptr[a]:
                                                                          W.indptr[b]]], width),
                                k, perm, root[mine, None],
                                self._segments(span[0][mine], span[1][mine], edges)))
@@ -618,7 +623,9 @@ class _Window:
         finite. ``metric``: False skips the metric (None in its place); S B (n_s, n_m; its
         columns ``marching``) is None unless ``whole``."""
         top = self._top.shape[0]
-        pool = np.zeros((top + self.pool, self.marching.size))  # [B's rows; the working set]
+        # [B's rows; the working set]: a row of the working set is written at its level
+        # before any later level or residual reads it (the W_k read earlier levels only)
+        pool = np.empty((top + self.pool, self.marching.size))
         pool[:top] = self._top
         self._data[:] = J[self._index]
         self._free.data[:] = J[self._free_index]
@@ -628,9 +635,9 @@ class _Window:
         sums = _Sums(self.marching.size, self.mid, Jf, r)
         self._reduce(-1, pool, sums)
         for k, chunks in enumerate(self._chunks):
-            for lo, hi, W, mine, perm, root, segments in chunks:
+            for into, W, mine, perm, root, segments in chunks:
                 S = W @ pool
-                pool[top + self._slot[lo:hi]] = S
+                pool[into] = S
                 if metric and mine:
                     rows = S[:mine] if perm is None else S[perm]
                     for a, b, start, stop in segments:
