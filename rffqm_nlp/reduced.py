@@ -972,12 +972,12 @@ class Manifold:
             return None
         if not self._sweeps.refill(G):
             return None
-        G_design, G_state = self._G_design(G) @ self.basis, self._G_state(G)
+        G_design, G_state = self._in_basis(self._G_design(G)), self._G_state(G)
         del G  # all of g's nonzeros, not held through the pass
         reduced = self._window(J, p.r, lift, metric)
         if reduced is None:
             return None
-        return _Linearization(J_design=self._J_design(J) @ self.basis,
+        return _Linearization(J_design=self._in_basis(self._J_design(J)),
                               J_state=self._J_state(J), G_design=G_design, G_state=G_state,
                               sensitivity=_Sensitivity(
                                   self._sweeps,
@@ -985,6 +985,10 @@ class Manifold:
                                   self._window.marching, self.basis, self.read),
                               JtJ=reduced[0], grad=reduced[1], pattern_metric=reduced[2],
                               lift=lift)
+
+    def _in_basis(self, design_columns: sp.csr_matrix) -> sp.csr_matrix:
+        """Design columns (k, n_d) times the basis (k, n_u); as they are with the identity."""
+        return design_columns @ self.basis if self.coarse else design_columns
 
     def _residual_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, Lift | None]:
         """The nonzeros of the residuals' Jacobian at x (with a lift, of its direct part)
