@@ -372,18 +372,18 @@ class _Window:
     """J' J, J' r and S_p' D_p S_p of the reduced problem in one pass over the levels,
     holding only the rows of S still needed (the working set) instead of all of S.
 
-    Each state row gets a slot in a pool (``pool`` rows) from its level until the last
-    level that uses it: the marching equations of a later level, or a residual row, which
-    is reduced at the level of its latest state unknown (residual rows that use no state
-    come first). A slot freed is reused by a later level, except where S B has at most
+    Each state row gets a slot in a pool (``pool`` rows) from its level until the last level
+    that uses it: the marching equations of a later level, or a residual row, which is
+    reduced at the level of its latest state unknown (residual rows that use no state come
+    first). A slot freed is reused by a later level, except where S B has at most
     :data:`WHOLE_S` entries (``whole``): then every state row keeps its own slot, the
     residual rows are reduced at once after the last level (one product instead of one a
-    level), and the pass gives S B. The pool's columns are the design's coordinates u (``basis`` B, n_d x
-    n_u: dd = B du, :func:`boundary_basis`) that the march reads (``marching``, n_m of them:
-    the boundary data, omega and the rigid alignment), and its first rows B's rows of the
-    design variables the march reads; the lifted design variables (``free``, in u, n_f: a
-    free correspondence's controls, B's identity there, which the march does not read)
-    have no column: their reduced Jacobian is J_d's columns plus F_u H
+    level), and the pass gives S B. The pool's columns are the design's coordinates u
+    (``basis`` B, n_d x n_u: dd = B du, :func:`boundary_basis`) that the march reads
+    (``marching``, n_m of them: the boundary data, omega and the rigid alignment), and its
+    first rows B's rows of the design variables the march reads; the lifted design variables
+    (``free``, in u, n_f: a free correspondence's controls, B's identity there, which the
+    march does not read) have no column: their reduced Jacobian is J_d's columns plus F_u H
     (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
 
     The pool's columns follow the boundary (``position``, (n_u,): the left edge from its
@@ -771,16 +771,15 @@ class Manifold:
 
     Built once per NLP: the index sets (``state`` in the order of the levels of the
     marching equations; ``read``, the state rows that the residuals' Jacobian, the
-    inequality rows or the state bounds read, positions in ``state``, and
-    ``bounded_read``, the bounded state's positions in ``read``: a step needs S in those
-    rows only, about a third of them at 20 x 20 panels), the levels, the CasADi Function of
-    the residuals and constraints
-    (trial points) and their Jacobians from local stencils (``nlp.r_jacobian``,
+    inequality rows or the state bounds read, positions in ``state``, and ``bounded_read``,
+    the bounded state's positions in ``read``: a step needs S in those rows only, about a
+    third of them at 20 x 20 panels), the levels, the CasADi Function of the residuals and
+    constraints (trial points) and their Jacobians from local stencils (``nlp.r_jacobian``,
     ``nlp.g_jacobian``; accepted points). The steps are taken in the coordinates u of the
     design's ``basis`` B (n_d x n_u, dd = B du; :func:`boundary_basis` with ``knots``, the
-    identity with None or where no class of boundary data has more than ``knots``
-    entries); ``coarse`` tells whether it is coarser than the identity, and
-    :meth:`refine` makes it the identity.
+    identity with None or where no class of boundary data has more than ``knots`` entries);
+    ``coarse`` tells whether it is coarser than the identity, and :meth:`refine` makes it
+    the identity.
     """
 
     def __init__(self, nlp: NLP, knots: int | None = None):
@@ -1242,9 +1241,9 @@ def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:
     multiplier estimates y of the right signs: the QP's own, and the least-squares ones
     of :func:`_least_squares_multipliers` (the QP's lag by the damped step: grad + A_W' y
     = -(H + lam M) dd)."""
-    if step.which.size == 0:
-        return float(np.max(np.abs(m.grad)))
     active = step.multipliers != 0
+    if not active.any():  # no row active (and an empty least-squares problem: SciPy aborts)
+        return float(np.max(np.abs(m.grad)))
     which, y = step.which[active], step.multipliers[active]
     A = steps.rows(m, which)
     lower_gap = np.minimum(-m.lower[which], 1e20)  # value - lower bound >= 0
@@ -1254,7 +1253,7 @@ def _kkt_error(m: _Model, steps: _Steps, step: _Step) -> float:
         stationarity = np.max(np.abs(m.grad + A.T @ y))
         complementarity = np.maximum(np.maximum(-y, 0.0) * lower_gap,
                                      np.maximum(y, 0.0) * upper_gap)
-        return float(max(stationarity, np.max(complementarity, initial=0.0)))
+        return float(max(stationarity, np.max(complementarity)))
 
     return min(error(y), error(_least_squares_multipliers(A, m.grad, np.sign(y))))
 

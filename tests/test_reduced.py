@@ -440,6 +440,7 @@ def test_the_optimality_error_takes_the_better_multipliers():
     assert _kkt_error([-1.0, 0.1], A, [-0.5], *held) == pytest.approx(1.0)  # y = 0: not +1
     assert _kkt_error([1.0, 0.1], A, [-0.5], *free) == pytest.approx(0.2)  # 1 x the gap 0.2
     assert _kkt_error([1.0, 0.1], A, [-0.5], [0.0], [0.0]) == pytest.approx(0.1)  # equality
+    assert _kkt_error([1.0, -2.0], A, [0.0], *held) == 2.0  # in the QP, not active
 
 
 @settings(max_examples=40, deadline=None)
