@@ -116,10 +116,11 @@ def test_refine_carries_deviations_linear_along_each_edge(layout, coarse, fine):
     ref = boundary.miura_boundary(*coarse, 1.0, 0.7, 1.1, layout)
     finer = boundary.miura_boundary(*fine, 0.5, 0.35, 1.1, layout)
     line = lambda t, parity, a, b: a + b * t + 0.01 * parity  # one line a class
+    angle_lines = lambda t: np.stack([line(t, np.arange(t.size) % 2, 0.01 * (c + 1),  # alpha, beta
+                                           0.02 * (1 - 2 * c)) for c in (0, 1)], axis=1)
     place = {"left": np.arange(coarse[0] + 1) / coarse[0],
              "bottom": (np.arange(coarse[1]) + 1) / coarse[1]}
-    deviation = {e: np.stack([line(t, np.arange(t.size) % 2, 0.01 * (c + 1), 0.02 * (1 - 2 * c))
-                              for c in (0, 1)], axis=1) for e, t in place.items()}
+    deviation = {e: angle_lines(t) for e, t in place.items()}
     sides = {e: line((np.arange(n) + 0.5) / n, np.arange(n) % 2, 1.0, 0.1 * (k + 1))
              for k, (e, n) in enumerate([("l_left", coarse[0]), ("l_bottom", coarse[1])])}
     left, bottom = ref.left.copy(), ref.bottom.copy()
@@ -128,13 +129,13 @@ def test_refine_carries_deviations_linear_along_each_edge(layout, coarse, fine):
     design = rq.BoundaryData(left, bottom, ref.l_left * sides["l_left"],
                              ref.l_bottom * sides["l_bottom"])
     out = boundary.refine(design, ref, finer)
-    for edge, n, n_f, first in (("left", coarse[0], fine[0], 0), ("bottom", coarse[1], fine[1], 1)):
+    for edge, n, n_f, first in (("left", coarse[0], fine[0], 0),
+                                ("bottom", coarse[1], fine[1], 1)):
         t = (np.arange(getattr(finer, edge).shape[0]) + first) / n_f
-        expected = np.stack([line(t, np.arange(t.size) % 2, 0.01 * (c + 1), 0.02 * (1 - 2 * c))
-                             for c in (0, 1)], axis=1) * n / n_f
         inside = within(t, (np.arange(getattr(design, edge).shape[0]) + first) / n)
-        np.testing.assert_allclose((getattr(out, edge)[:, :2] - getattr(finer, edge)[:, :2])[inside],
-                                   expected[inside], atol=1e-14)
+        carried = getattr(out, edge)[:, :2] - getattr(finer, edge)[:, :2]
+        np.testing.assert_allclose(carried[inside], (angle_lines(t) * n / n_f)[inside],
+                                   atol=1e-14)
         np.testing.assert_array_equal(getattr(out, edge)[:, 2], getattr(finer, edge)[:, 2])
     for k, (name, n, n_f) in enumerate([("l_left", coarse[0], fine[0]),
                                         ("l_bottom", coarse[1], fine[1])]):
