@@ -451,7 +451,10 @@ class DesignProblem:
         ``warm_start``: a result of this problem at these panels or fewer to start from
         instead of the Miura (a coarser design carried to these panels, coarse-to-fine:
         :meth:`carried`; the Miura stays the Tikhonov reference and the mountain-valley
-        pattern; a free correspondence's map is kept, see :meth:`transcribe`).
+        pattern; a free correspondence's map is kept, see :meth:`transcribe`); where it
+        breaks a constraint, Levenberg-Marquardt starts from its boundary data moved part
+        of the way toward the Miura's (``stats.start_moved``,
+        :func:`rffqm_nlp.reduced.admissible_toward`).
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
         Raises :class:`InputError` before any work when the solve needs more memory than
@@ -475,8 +478,11 @@ class DesignProblem:
             nlp = self.transcribe(start, self._stage_weights(factor),
                                   warm_start if x is None else None, options)
             record.build_time += time.perf_counter() - t1
+            reference = (self._miura_point(start, options, record)
+                         if warm_start is not None and x is None else None)
             outcome = self._solve_stage(nlp, start, options, record, nlp.x0 if x is None else x,
-                                        warm=warm_start is not None or stage > 0)
+                                        warm=warm_start is not None or stage > 0,
+                                        reference=reference)
             x = outcome.x
             if not outcome.success or outcome.status == "Fit_Reached":
                 break
@@ -538,11 +544,13 @@ class DesignProblem:
         return dict(self.weights, regularization=factor * self.weights["regularization"])
 
     def _solve_stage(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
-                     record: "_Record", x: np.ndarray, warm: bool) -> "_Outcome":
+                     record: "_Record", x: np.ndarray, warm: bool,
+                     reference: Callable[[], np.ndarray] | None = None) -> "_Outcome":
         """One continuation stage from x: Levenberg-Marquardt (with that solver), then
-        IPOPT when it stalls or cannot start (an inadmissible start)."""
+        IPOPT when it stalls or cannot start (an inadmissible start, even moved toward
+        ``reference()`` where given: :func:`rffqm_nlp.reduced.admissible_toward`)."""
         if options.solver == LM:
-            marched = self._solve_levenberg_marquardt(nlp, start, options, record, x)
+            marched = self._solve_levenberg_marquardt(nlp, start, options, record, x, reference)
             if marched is not None and marched.status != "Stalled":
                 return marched
             if marched is not None:
@@ -551,10 +559,12 @@ class DesignProblem:
         return self._solve_ipopt(nlp, start, options, record, x, warm, None)
 
     def _solve_levenberg_marquardt(self, nlp: transcription.NLP, start: Start,
-                                   options: SolveOptions, record: "_Record",
-                                   x: np.ndarray) -> "_Outcome | None":
-        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x,
-        every step recorded; None when x is not an admissible start (no step taken)."""
+                                   options: SolveOptions, record: "_Record", x: np.ndarray,
+                                   reference: Callable[[], np.ndarray] | None = None
+                                   ) -> "_Outcome | None":
+        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x
+        (or, where x breaks a constraint, x moved toward ``reference()``), every step
+        recorded; None when it has no admissible start (no step taken)."""
         deadline = None if options.time_limit is None else record.t0 + options.time_limit
         t1 = time.perf_counter()
         manifold = reduced.Manifold(nlp, options.boundary_knots or None)  # like IPOPT's build
@@ -562,9 +572,10 @@ class DesignProblem:
         out = reduced.levenberg_marquardt(
             nlp, x, options.damping, options.max_iter - record.iterations, deadline=deadline,
             stop=self._fit_reached(nlp, start, options), callback=record.log,
-            tol=options.tol, manifold=manifold)
+            tol=options.tol, manifold=manifold, reference=reference)
         if out.status == "Inadmissible_Start":
             return None
+        record.start_moved = out.moved or record.start_moved  # later stages start admissible
         record.iterations += out.iterations
         record.marched_iterations += out.iterations
         status = out.status
@@ -651,6 +662,20 @@ class DesignProblem:
                            opts)
         solver._iteration_log = log  # keep the callback alive as long as the solver
         return solver, log
+
+    def _miura_point(self, start: Start, options: SolveOptions,
+                     record: "_Record") -> Callable[[], np.ndarray]:
+        """The Miura start's point (n,) of the NLP, transcribed when first asked for (its
+        time counted as build time): where a warm start breaks a constraint, Levenberg-
+        Marquardt moves its boundary data toward it."""
+
+        def point() -> np.ndarray:
+            t1 = time.perf_counter()
+            x = self.transcribe(start, options=options).x0
+            record.build_time += time.perf_counter() - t1
+            return x
+
+        return point
 
     def _fit_reached(self, nlp: transcription.NLP, start: Start, options: SolveOptions):
         """For ``stop_rms``: does the aligned coarse lattice at x fit the target well enough?"""
@@ -898,6 +923,7 @@ class _Record:
     gauss_newton_iterations: int = 0
     marched_iterations: int = 0
     build_time: float = 0.0
+    start_moved: float = 0.0
 
     def log(self, objective: float, violation: float) -> None:
         """Record one iteration (of Levenberg-Marquardt; IPOPT's: :class:`_IterationLog`)."""
@@ -917,7 +943,8 @@ class _Record:
             solve_time=time.perf_counter() - self.t0 - self.build_time, objective=objective,
             solver=options.solver, transcription=options.transcription,
             hessian=options.hessian, gauss_newton_iterations=self.gauss_newton_iterations,
-            marched_iterations=self.marched_iterations, history=self.history)
+            marched_iterations=self.marched_iterations, start_moved=self.start_moved,
+            history=self.history)
 
 
 @dataclass(frozen=True)

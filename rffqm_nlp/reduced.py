@@ -128,6 +128,9 @@ METRIC_DAMPING = 1e-3
 #: from zero at every iteration, so curvature learned far back is dropped instead of being
 #: sized away with what the last steps learned (docs/solvers.md)
 SECANT_PAIRS = 3
+#: the fractions of the way from an inadmissible start's boundary data to the reference's
+#: tried in turn (:func:`admissible_toward`)
+TOWARD_REFERENCE = (0.1, 0.25, 0.5, 1.0)
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
@@ -141,7 +144,9 @@ class Outcome:
     loss), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
     "Inadmissible_Start" (the start, re-marched, breaks a constraint or does not march: no
     step was taken, ``x`` is the start as given and ``objective`` None). ``scale``: the
-    optimality error's, max(1, |J' r at the start| / 100) (None before the first model)."""
+    optimality error's, max(1, |J' r at the start| / 100) (None before the first model).
+    ``moved``: the fraction of the way to the reference that an inadmissible start's
+    boundary data were moved before the run (:func:`admissible_toward`; 0: not moved)."""
 
     x: np.ndarray
     objective: float | None
@@ -149,6 +154,7 @@ class Outcome:
     status: str
     kkt_error: float | None = None
     scale: float | None = None
+    moved: float = 0.0
 
     @property
     def success(self) -> bool:
@@ -1296,14 +1302,19 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
                         deadline: float | None = None,
                         stop: Callable[[np.ndarray], bool] | None = None,
                         callback: Callable[[float, float], None] | None = None,
-                        tol: float = 1e-6, manifold: Manifold | None = None) -> Outcome:
+                        tol: float = 1e-6, manifold: Manifold | None = None,
+                        reference: Callable[[], np.ndarray] | None = None) -> Outcome:
     """Minimise the simultaneous NLP's loss over marched designs, from x (re-marched first),
     to first-order optimality (status "Solve_Succeeded", see the module docstring).
 
     ``damping``: the first lam; ``deadline``: a ``time.perf_counter()`` after which the run
     stops; ``stop(x)``: end once it holds at an accepted iterate; ``callback(objective,
     violation)`` at the start and after every accepted step; ``tol``: of the optimality
-    error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build).
+    error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build);
+    ``reference``: gives an admissible point (n,), called only where x is not admissible:
+    the run then starts from x's boundary data moved toward the reference's
+    (:func:`admissible_toward`, ``Outcome.moved``), and ends "Inadmissible_Start" only
+    where no fraction of :data:`TOWARD_REFERENCE` is admissible.
 
     With a coarse basis (:attr:`Manifold.coarse`) the steps are taken in it first; where
     that run ends optimal in it or stalls, the manifold is refined and the run goes on in
@@ -1313,13 +1324,37 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     man = Manifold(nlp) if manifold is None else manifold
     with man.blas_threads():
         out = _levenberg_marquardt(man, x, damping, max_iter, deadline, stop, callback, tol)
+        if out.status == "Inadmissible_Start" and reference is not None:
+            moved = admissible_toward(man, np.asarray(x, dtype=float), reference())
+            if moved is not None:
+                out = replace(_levenberg_marquardt(man, moved[0], damping, max_iter, deadline,
+                                                   stop, callback, tol), moved=moved[1])
     if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled"):
         return out
     man.refine()
     with man.blas_threads():
         rest = _levenberg_marquardt(man, out.x, damping, max_iter - out.iterations, deadline,
                                     stop, callback, tol, announce=False, scale=out.scale)
-    return replace(rest, iterations=out.iterations + rest.iterations)
+    return replace(rest, iterations=out.iterations + rest.iterations, moved=out.moved)
+
+
+def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
+                      ) -> tuple[np.ndarray, float] | None:
+    """x (n,) with its boundary data (:attr:`NLP.boundary_class` >= 0; omega, the alignment
+    and any controls stay) moved toward ``reference``'s (n,) by each fraction t of
+    :data:`TOWARD_REFERENCE` in turn: the first such point that marches and holds every
+    constraint to :data:`FEASIBLE`, re-marched, and its t; None when none does (a start
+    carried from a coarser design can break a side's minimum length that the Miura keeps)."""
+    nlp = man.nlp
+    moved = nlp.boundary_class >= 0
+    for t in TOWARD_REFERENCE:
+        y = x.copy()
+        y[moved] += t * (reference[moved] - x[moved])
+        y = nlp.project(y)
+        p = None if y is None else man.point(y)
+        if p is not None and man.violation(p) <= FEASIBLE:
+            return y, t
+    return None
 
 
 def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter: int,

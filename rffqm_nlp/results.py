@@ -106,6 +106,9 @@ class SolveStats:
     * ``iterations``: all iterations, of every solver and continuation stage;
       ``gauss_newton_iterations``: those of IPOPT with the Gauss-Newton Hessian;
       ``marched_iterations``: those of Levenberg-Marquardt on the marching manifold;
+    * ``start_moved``: where a warm start broke a constraint, the fraction of the way to the
+      Miura's boundary data that Levenberg-Marquardt moved it before its first step (0: it
+      started from the warm start as given);
     * ``build_time``, ``solve_time``: seconds spent building the NLPs and solvers, and the rest;
     * ``objective``: the final objective (the loss);
     * ``solver``, ``transcription``, ``hessian``: the options they ran with;
@@ -126,6 +129,7 @@ class SolveStats:
     hessian: str
     gauss_newton_iterations: int = 0
     marched_iterations: int = 0
+    start_moved: float = 0.0
     history: dict[str, list[float]] = field(
         default_factory=lambda: {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
     multistart: dict[str, Any] | None = None

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import boundary, design, numpy_model, shape, surfaces, transcription
+from rffqm_nlp import boundary, design, numpy_model, reduced, shape, surfaces, transcription
 from rffqm_nlp import vertex as vx
 from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.results import DesignResult
@@ -185,6 +185,41 @@ def test_a_coarser_design_carried_over_starts_nearer_the_target(coarse_sphere_ca
     assert carried.stats.status == miura.stats.status == "Fit_Reached"
     assert carried.stats.history["objective"][0] < 0.5 * miura.stats.history["objective"][0]
     assert carried.fit.rms <= 0.009
+
+
+def test_a_carried_start_that_breaks_a_row_is_moved_toward_the_miura():
+    """The 6 x 6 sphere cap's design carried to 10 x 10 breaks a side's minimum length:
+    Levenberg-Marquardt alone cannot start from it, but from its boundary data moved the
+    first fraction of TOWARD_REFERENCE toward the Miura's that holds every row, and the
+    warm-started solve ends optimal by Levenberg-Marquardt alone (not IPOPT's)."""
+    prob, opts = small("sphere_cap", solver="levenberg-marquardt")
+    fine = replace(prob, panels=(10, 10))
+    coarse = replace(prob, panels=(6, 6)).solve(opts)
+    nlp = fine.transcribe(initial=coarse, options=opts)
+    man = reduced.Manifold(nlp)
+    assert man.violation(man.point(nlp.project(nlp.x0))) > 1e-3
+    out = reduced.levenberg_marquardt(nlp, nlp.x0, opts.damping, 5, manifold=man)
+    assert out.status == "Inadmissible_Start"
+
+    miura = fine.transcribe(options=opts).x0
+    x, t = reduced.admissible_toward(man, nlp.x0, miura)
+    moved = nlp.boundary_class >= 0
+    np.testing.assert_allclose(x[moved], nlp.x0[moved] + t * (miura[moved] - nlp.x0[moved]),
+                               atol=1e-12)
+    np.testing.assert_array_equal(x[-8:], nlp.x0[-8:])  # omega and the alignment stay
+    assert man.violation(man.point(x)) <= reduced.FEASIBLE
+    for earlier in reduced.TOWARD_REFERENCE[:reduced.TOWARD_REFERENCE.index(t)]:
+        y = nlp.x0.copy()
+        y[moved] += earlier * (miura[moved] - nlp.x0[moved])
+        y = nlp.project(y)
+        assert y is None or man.violation(man.point(y)) > reduced.FEASIBLE
+
+    res = fine.solve(opts, warm_start=coarse)
+    assert res.stats.status == "Solve_Succeeded"
+    assert res.stats.marched_iterations == res.stats.iterations > 0
+    assert res.stats.start_moved == t
+    assert rq.SolveStats.from_dict(res.stats.to_dict()).start_moved == t
+    assert fine.solve(opts).stats.start_moved == 0.0
 
 
 def test_a_coarser_design_of_another_miura_or_that_does_not_march_is_refused(
