@@ -452,9 +452,10 @@ class DesignProblem:
         instead of the Miura (a coarser design carried to these panels, coarse-to-fine:
         :meth:`carried`; the Miura stays the Tikhonov reference and the mountain-valley
         pattern; a free correspondence's map is kept, see :meth:`transcribe`); where it
-        breaks a constraint, Levenberg-Marquardt starts from its boundary data moved part
-        of the way toward the Miura's (``stats.start_moved``,
-        :func:`rffqm_nlp.reduced.admissible_toward`).
+        breaks a constraint, solver "levenberg-marquardt" starts from its free boundary
+        data moved part or all of the way toward the Miura's (``stats.start_moved``,
+        :func:`rffqm_nlp.reduced.admissible_toward`), and IPOPT from the warm start itself
+        where no such point holds every constraint.
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
         Raises :class:`InputError` before any work when the solve needs more memory than

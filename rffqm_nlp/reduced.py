@@ -1340,13 +1340,14 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
 
 def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
                       ) -> tuple[np.ndarray, float] | None:
-    """x (n,) with its boundary data (:attr:`NLP.boundary_class` >= 0; omega, the alignment
-    and any controls stay) moved toward ``reference``'s (n,) by each fraction t of
-    :data:`TOWARD_REFERENCE` in turn: the first such point that marches and holds every
-    constraint to :data:`FEASIBLE`, re-marched, and its t; None when none does (a start
-    carried from a coarser design can break a side's minimum length that the Miura keeps)."""
+    """x (n,) with its free boundary data (:attr:`NLP.boundary_class` >= 0, not fixed by
+    equal bounds; omega, the alignment and any controls stay) moved toward ``reference``'s
+    (n,) by each fraction t of :data:`TOWARD_REFERENCE` in turn: the first such point that
+    marches and holds every constraint to :data:`FEASIBLE`, re-marched, and its t; None when
+    none does (a start carried from a coarser design can break a side's minimum length that
+    the Miura keeps)."""
     nlp = man.nlp
-    moved = nlp.boundary_class >= 0
+    moved = (nlp.boundary_class >= 0) & (nlp.lbx < nlp.ubx)
     for t in TOWARD_REFERENCE:
         y = x.copy()
         y[moved] += t * (reference[moved] - x[moved])

@@ -187,14 +187,21 @@ def test_a_coarser_design_carried_over_starts_nearer_the_target(coarse_sphere_ca
     assert carried.fit.rms <= 0.009
 
 
-def test_a_carried_start_that_breaks_a_row_is_moved_toward_the_miura():
-    """The 6 x 6 sphere cap's design carried to 10 x 10 breaks a side's minimum length:
-    Levenberg-Marquardt alone cannot start from it, but from its boundary data moved the
-    first fraction of TOWARD_REFERENCE toward the Miura's that holds every row, and the
-    warm-started solve ends optimal by Levenberg-Marquardt alone (not IPOPT's)."""
+@pytest.fixture(scope="module")
+def broken_carry():
+    """The 6 x 6 sphere cap's design and the 10 x 10 problem it is carried to, where it
+    breaks a side's minimum length (Levenberg-Marquardt's options)."""
     prob, opts = small("sphere_cap", solver="levenberg-marquardt")
-    fine = replace(prob, panels=(10, 10))
-    coarse = replace(prob, panels=(6, 6)).solve(opts)
+    return replace(prob, panels=(10, 10)), opts, replace(prob, panels=(6, 6)).solve(opts)
+
+
+def test_a_carried_start_that_breaks_a_row_is_moved_toward_the_miura(broken_carry,
+                                                                     monkeypatch):
+    """Levenberg-Marquardt alone cannot start from the broken carried design; its boundary
+    data moved by the first fraction of TOWARD_REFERENCE toward the Miura's that holds
+    every row can, and the warm-started solve ends optimal by Levenberg-Marquardt alone
+    (not IPOPT's), the fraction recorded; an admissible warm start is not moved."""
+    fine, opts, coarse = broken_carry
     nlp = fine.transcribe(initial=coarse, options=opts)
     man = reduced.Manifold(nlp)
     assert man.violation(man.point(nlp.project(nlp.x0))) > 1e-3
@@ -202,24 +209,40 @@ def test_a_carried_start_that_breaks_a_row_is_moved_toward_the_miura():
     assert out.status == "Inadmissible_Start"
 
     miura = fine.transcribe(options=opts).x0
+    moved = nlp.boundary_class >= 0  # nothing fixed: all of them
+    monkeypatch.setattr(reduced, "TOWARD_REFERENCE", (0.0, 1.0))  # the start, then the Miura's
     x, t = reduced.admissible_toward(man, nlp.x0, miura)
-    moved = nlp.boundary_class >= 0
+    assert t == 1.0
+    np.testing.assert_allclose(x[moved], miura[moved], atol=1e-12)
+    monkeypatch.undo()
+    x, t = reduced.admissible_toward(man, nlp.x0, miura)
     np.testing.assert_allclose(x[moved], nlp.x0[moved] + t * (miura[moved] - nlp.x0[moved]),
                                atol=1e-12)
     np.testing.assert_array_equal(x[-8:], nlp.x0[-8:])  # omega and the alignment stay
     assert man.violation(man.point(x)) <= reduced.FEASIBLE
-    for earlier in reduced.TOWARD_REFERENCE[:reduced.TOWARD_REFERENCE.index(t)]:
-        y = nlp.x0.copy()
-        y[moved] += earlier * (miura[moved] - nlp.x0[moved])
-        y = nlp.project(y)
-        assert y is None or man.violation(man.point(y)) > reduced.FEASIBLE
 
     res = fine.solve(opts, warm_start=coarse)
     assert res.stats.status == "Solve_Succeeded"
     assert res.stats.marched_iterations == res.stats.iterations > 0
     assert res.stats.start_moved == t
     assert rq.SolveStats.from_dict(res.stats.to_dict()).start_moved == t
-    assert fine.solve(opts).stats.start_moved == 0.0
+    assert fine.solve(opts, warm_start=res).stats.start_moved == 0.0
+
+
+def test_a_moved_start_keeps_the_fixed_boundary_data(broken_carry):
+    """With the sides fixed at the carried design's, only the angles move toward the
+    Miura's: the fixed sides' bounds hold, and Levenberg-Marquardt still solves alone."""
+    fine, opts, coarse = broken_carry
+    fine = replace(fine, fix=("lengths",))
+    nlp = fine.transcribe(initial=coarse, options=opts)
+    man = reduced.Manifold(nlp)
+    x, t = reduced.admissible_toward(man, nlp.x0, fine.transcribe(options=opts).x0)
+    sides = nlp.groups["lengths"]
+    np.testing.assert_array_equal(x[sides], nlp.x0[sides])
+    assert t > 0 and man.violation(man.point(x)) <= reduced.FEASIBLE
+    res = fine.solve(opts, warm_start=coarse)
+    assert res.stats.marched_iterations == res.stats.iterations > 0
+    assert res.stats.start_moved == t
 
 
 def test_a_coarser_design_of_another_miura_or_that_does_not_march_is_refused(
