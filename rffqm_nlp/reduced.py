@@ -965,6 +965,13 @@ class Manifold:
             return None
         return _Point(x=x, r=r, g=g)
 
+    def admissible(self, x: np.ndarray) -> _Point | None:
+        """The point of x (n,) re-marched where it marches, is finite and holds every
+        constraint and bound to :data:`FEASIBLE`; None otherwise."""
+        marched = self.nlp.project(np.asarray(x, dtype=float))
+        p = None if marched is None else self.point(marched)
+        return p if p is not None and self.violation(p) <= FEASIBLE else None
+
     def linearize(self, p: _Point, metric: bool = True) -> _Linearization | None:
         """The derivatives at p; None where they are not finite or the marching equations
         no longer determine their unknowns. Invalidates the last point's. ``metric``: False
@@ -1346,15 +1353,13 @@ def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
     marches and holds every constraint to :data:`FEASIBLE`, re-marched, and its t; None when
     none does (a start carried from a coarser design can break a side's minimum length that
     the Miura keeps)."""
-    nlp = man.nlp
-    moved = (nlp.boundary_class >= 0) & (nlp.lbx < nlp.ubx)
+    moved = (man.nlp.boundary_class >= 0) & (man.nlp.lbx < man.nlp.ubx)
     for t in TOWARD_REFERENCE:
         y = x.copy()
         y[moved] += t * (reference[moved] - x[moved])
-        y = nlp.project(y)
-        p = None if y is None else man.point(y)
-        if p is not None and man.violation(p) <= FEASIBLE:
-            return y, t
+        p = man.admissible(y)
+        if p is not None:
+            return p.x, t
     return None
 
 
@@ -1367,9 +1372,8 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
     """:func:`levenberg_marquardt` on ``man`` (``announce``: the callback at the start
     too; ``scale``: the optimality error's, None: from the first gradient)."""
     nlp = man.nlp
-    start = nlp.project(np.asarray(x, dtype=float))
-    p = None if start is None else man.point(start)
-    if p is None or man.violation(p) > FEASIBLE:
+    p = man.admissible(x)
+    if p is None:
         return Outcome(x=np.asarray(x, dtype=float), objective=None, iterations=0,
                        status="Inadmissible_Start")
     if callback is not None and announce:
