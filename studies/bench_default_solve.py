@@ -1,4 +1,4 @@
-"""Benchmark of the default solve to optimality on the bundled targets.
+"""Benchmark of the default solve to optimality on the bundled targets and user surfaces.
 
 For each bundled target (targets/*.toml, its ``stop_rms`` dropped: the solve runs to the
 optimality conditions at ``tol``) at N x N panels (default 20) it solves, each in a fresh
@@ -14,6 +14,11 @@ process with the given numbers of OpenBLAS threads (default 1 and 2):
 * ``previous`` (with ``--previous REV``): the default solve of the code at that git
   revision, to compare a change of the default solve with the code before it in one run.
 
+Then the surfaces a user brings (:data:`USER_SURFACES`), each solved as a user would,
+``DesignProblem(target=surface, panels=(N, N)).solve()`` with the default options, in a
+fresh process per solve: every built-in surface without a target file, and two callables
+(``surfaces.Custom``: the README's lambda, and a bump written with CasADi's exp).
+
 The yardstick, measured in this run: one forward evaluation of the NumPy model
 (``numpy_model.march`` of the problem's starting Miura + ``numpy_model.fold`` at omega0),
 best of ``--repeat`` x 10 calls; "solve / forward" is the solve's wall time over it.
@@ -24,17 +29,19 @@ Then one default solve per target runs under cProfile (in a child, ``--threads``
 value), and so does the baseline's: the time spent in the solver's parts.
 
 Each solve runs ``--repeat`` times (default 1); a table gives the default path's fastest and
-median solve per target and thread count against the goal.
+median solve per target (or user surface) and thread count against the goal.
 
 Usage: ``python studies/bench_default_solve.py [--n 20] [--threads 1,2] [--repeat 1]
 [--baseline REV] [--previous REV] [--out studies/results/bench_default_solve.md]``;
-``--smoke``: 4 x 4 panels, one thread, no baseline, output to a temporary folder.
+``--smoke``: 4 x 4 panels, one thread, no baseline, of the user surfaces the two callables,
+output to a temporary folder.
 """
 
 from __future__ import annotations
 
 import argparse
 import cProfile
+import functools
 import json
 import os
 import pstats
@@ -42,7 +49,9 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable
 
+import casadi as ca
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +60,10 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
 
 from common import (RESULTS, TARGETS, Run, add_smoke, export_package, fmt,  # noqa: E402
                     run_child, smoke_dir, solve_in_child, target_problem, write_table)
-from rffqm_nlp import numpy_model  # noqa: E402
+from rffqm_nlp import DesignProblem, numpy_model, surfaces  # noqa: E402
+from rffqm_nlp.errors import RffqmError  # noqa: E402
+from rffqm_nlp.results import SolveStats  # noqa: E402
+from rffqm_nlp.surfaces import Surface  # noqa: E402
 
 #: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
 BASELINE = "0f9ad8d"
@@ -72,10 +84,28 @@ PARTS = [("whole solve", "design.py", "solve"),
          ("IPOPT handover", "design.py", "_solve_ipopt")]
 
 
+#: the surfaces a user brings (name -> a maker): the built-in ones without a target file,
+#: and two callables
+USER_SURFACES: dict[str, Callable[[], Surface]] = {
+    **{name: functools.partial(surfaces.get, name) for name in surfaces.names()
+       if not (ROOT / "targets" / f"{name}.toml").exists()},
+    "custom_readme": lambda: surfaces.Custom(lambda u, v: (u, v, 0.1 * u * v),
+                                             ((-1, 1), (-1, 1))),
+    "custom_bump": lambda: surfaces.Custom(
+        lambda u, v: (u, v, 0.3 * ca.exp(-(u * u + v * v))), ((-1.5, 1.5), (-1.5, 1.5))),
+}
+
+
+def problem_of(name: str, n: int) -> DesignProblem:
+    """The problem of a bundled target (its file's) or of a user surface at n x n panels."""
+    if name in USER_SURFACES:
+        return DesignProblem(target=USER_SURFACES[name](), panels=(n, n))
+    return target_problem(name, n)[0]
+
+
 def forward_time(name: str, n: int, repeat: int) -> float:
-    """Best wall time (s) of one NumPy march + fold of the target's starting Miura."""
-    problem, _ = target_problem(name, n)
-    start = problem.start()
+    """Best wall time (s) of one NumPy march + fold of the problem's starting Miura."""
+    start = problem_of(name, n).start()
     best = np.inf
     for _ in range(10 * repeat):
         t0 = time.perf_counter()
@@ -86,10 +116,36 @@ def forward_time(name: str, n: int, repeat: int) -> float:
 
 def solve_row(name: str, n: int, path: str, threads: int, package: Path) -> dict:
     """One solve in a fresh process importing the package from ``package``."""
-    solve = {"stop_rms": None, **({"solver": "ipopt"} if path == "ipopt" else {})}
-    row = solve_in_child(name, n, solve=solve,
-                         env={"PYTHONPATH": str(package), "OPENBLAS_NUM_THREADS": str(threads)})
+    env = {"PYTHONPATH": str(package), "OPENBLAS_NUM_THREADS": str(threads)}
+    if name in USER_SURFACES:
+        row = run_child(__file__, "--surface-child", name, str(n), env=env)
+    else:
+        solve = {"stop_rms": None, **({"solver": "ipopt"} if path == "ipopt" else {})}
+        row = solve_in_child(name, n, solve=solve, env=env)
     row.update(path=path, threads=threads)
+    return row
+
+
+def solve_surface(name: str, n: int) -> dict:
+    """A user surface's default solve at n x n panels: its statistics, fit and CPU time (a
+    failed solve: its status and error, and the statistics it has)."""
+    problem = problem_of(name, n)
+    c0 = time.process_time()
+    try:
+        res = problem.solve()
+        row = {**res.stats.to_dict(), "fit": res.fit.to_dict()}
+    except RffqmError as exc:  # a failed run is a result here
+        stats = getattr(exc, "stats", None)
+        row = {**(stats.to_dict() if isinstance(stats, SolveStats) else {}),
+               "status": getattr(exc, "status", None) or type(exc).__name__, "error": str(exc)}
+    return {"target": name, **row, "cpu": time.process_time() - c0}
+
+
+def report(row: dict) -> dict:
+    """Print a solve's row in short (the run's progress) and return it."""
+    print(json.dumps({k: row.get(k) for k in ("target", "path", "threads", "status",
+                                               "iterations", "build_time", "solve_time")}),
+          flush=True)
     return row
 
 
@@ -133,16 +189,23 @@ def table(rows: list[dict], forward: dict[str, float]) -> list[str]:
 
 def goal_table(rows: list[dict]) -> list[str]:
     """The default solve against :data:`GOAL`: per target and thread count, the fastest
-    and the median of the repeats (the machine's speed varies between runs)."""
-    lines = ["| target | threads | runs | solve, fastest (s) | solve, median (s) "
-             "| fastest within the goal |", "|---|---|---|---|---|---|"]
-    groups: dict[tuple[str, int], list[float]] = {}
+    and the median of the repeats that succeeded (the machine's speed varies between runs);
+    a failed run fails the goal."""
+    lines = ["| target | threads | runs | failed | solve, fastest (s) | solve, median (s) "
+             "| fastest within the goal |", "|---|---|---|---|---|---|---|"]
+    groups: dict[tuple[str, int], list[float | None]] = {}
     for r in rows:
-        if r["path"] == "default" and r.get("solve_time") is not None:
-            groups.setdefault((r["target"], r["threads"]), []).append(r["solve_time"])
-    for (target, threads), times in groups.items():
-        lines.append(f"| {target} | {threads} | {len(times)} | {min(times):.2f} "
-                     f"| {float(np.median(times)):.2f} | {'yes' if min(times) <= GOAL else 'no'} |")
+        if r["path"] == "default":
+            time_ = r.get("solve_time") if r.get("success") else None
+            groups.setdefault((r["target"], r["threads"]), []).append(time_)
+    for (target, threads), runs in groups.items():
+        times = [t for t in runs if t is not None]
+        failed = len(runs) - len(times)
+        within = bool(times) and not failed and min(times) <= GOAL
+        lines.append(f"| {target} | {threads} | {len(runs)} | {failed} "
+                     f"| {fmt(min(times, default=None), '.2f')} "
+                     f"| {fmt(float(np.median(times)) if times else None, '.2f')} "
+                     f"| {'yes' if within else 'no'} |")
     return lines
 
 
@@ -171,7 +234,8 @@ def main() -> None:
         args.out = smoke_dir("bench_default_solve") / "bench_default_solve.md"
     threads = [int(t) for t in args.threads.split(",")]
     run = Run()
-    forward = {name: forward_time(name, args.n, args.repeat) for name in TARGETS}
+    users = [k for k in USER_SURFACES if k.startswith("custom_") or not args.smoke]
+    forward = {name: forward_time(name, args.n, args.repeat) for name in (*TARGETS, *users)}
     packages = {"default": ROOT}
     if args.previous:  # right after the default: the two rows see the same load
         packages["previous"] = export_package(args.previous)
@@ -183,10 +247,10 @@ def main() -> None:
         for name in TARGETS:
             for path, package in packages.items():
                 for _ in range(args.repeat):
-                    rows.append(solve_row(name, args.n, path, t, package))
-                    print(json.dumps({k: rows[-1].get(k) for k in
-                                      ("target", "path", "threads", "status", "iterations",
-                                       "build_time", "solve_time")}), flush=True)
+                    rows.append(report(solve_row(name, args.n, path, t, package)))
+        for name in users:
+            for _ in range(args.repeat):
+                rows.append(report(solve_row(name, args.n, "default", t, ROOT)))
     profiles = {}
     for name in TARGETS:
         for path in ("default", "baseline"):
@@ -200,7 +264,8 @@ def main() -> None:
              "Yardstick, one NumPy forward evaluation (march + fold), best wall time (ms): "
              + ", ".join(f"{k} {1e3 * v:.1f}" for k, v in forward.items()) + ".", "",
              *table(rows, forward), "",
-             f"Goal: solve <= {GOAL} s at 20 x 20 panels (the default path):", "",
+             f"Goal: solve <= {GOAL} s at 20 x 20 panels (the default path; the user surfaces "
+             "with the default options):", "",
              *goal_table(rows), "",
              f"Profile (cumulative seconds, {threads[0]} thread(s), one solve each; cProfile "
              "inflates them):", "", *profile_table(profiles), ""]
@@ -211,5 +276,7 @@ def main() -> None:
 if __name__ == "__main__":
     if len(sys.argv) == 4 and sys.argv[1] == "--profile-child":
         print(json.dumps(profile(sys.argv[2], int(sys.argv[3]))))
+    elif len(sys.argv) == 4 and sys.argv[1] == "--surface-child":
+        print(json.dumps(solve_surface(sys.argv[2], int(sys.argv[3]))))
     else:
         main()
