@@ -129,11 +129,12 @@ class SolveOptions:
     * ``solver``: "levenberg-marquardt" (the default) or "ipopt". Levenberg-Marquardt runs
       on the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only):
       its variables are the boundary data, omega and the alignment, every iterate is
-      re-marched, so every iterate is an admissible design, and the inequalities enter each
-      step linearised (a small QP). It stops at ``stop_rms``, or where the reduced
-      problem's optimality conditions hold to ``tol`` (status "Solve_Succeeded"); only when
-      it stalls does IPOPT (with ``hessian``) finish from its point. Measured against IPOPT
-      in studies/results/bench_default_solve.md;
+      re-marched, so every iterate is an admissible design (after restoration steps from a
+      start that breaks a constraint), and the inequalities enter each step linearised (a
+      small QP). It stops at ``stop_rms``, or where the reduced problem's optimality
+      conditions hold to ``tol`` (status "Solve_Succeeded"); only when it stalls, or its
+      restoration fails, does IPOPT (with ``hessian``) finish. Measured against IPOPT in
+      studies/results/bench_default_solve.md;
     * ``transcription``: "simultaneous" (all pattern and kinematic quantities as variables,
       the marching equations as sparse equality constraints) or "sequential" (the marching
       graph as a function of the boundary data; IPOPT only). Both state the same NLP;
@@ -454,8 +455,9 @@ class DesignProblem:
         pattern; a free correspondence's map is kept, see :meth:`transcribe`); where it
         breaks a constraint, solver "levenberg-marquardt" starts from its free boundary
         data moved part or all of the way toward the Miura's (``stats.start_moved``,
-        :func:`rffqm_nlp.reduced.admissible_toward`), and IPOPT from the warm start itself
-        where no such point holds every constraint.
+        :func:`rffqm_nlp.reduced.admissible_toward`), or where no such point holds every
+        constraint restores the warm start itself (``stats.restoration_iterations``), and
+        IPOPT starts from it where that fails too.
         ``verbose``: IPOPT prints its iterations.
         With ``options.multistart`` > 1 see :func:`solve_multistart`.
         Raises :class:`InputError` before any work when the solve needs more memory than
@@ -548,8 +550,9 @@ class DesignProblem:
                      record: "_Record", x: np.ndarray, warm: bool,
                      reference: Callable[[], np.ndarray] | None = None) -> "_Outcome":
         """One continuation stage from x: Levenberg-Marquardt (with that solver), then
-        IPOPT when it stalls or cannot start (an inadmissible start, even moved toward
-        ``reference()`` where given: :func:`rffqm_nlp.reduced.admissible_toward`)."""
+        IPOPT when it stalls or reaches no admissible point (from a start that breaks a
+        constraint: moved toward ``reference()`` where given,
+        :func:`rffqm_nlp.reduced.admissible_toward`, else restored)."""
         if options.solver == LM:
             marched = self._solve_levenberg_marquardt(nlp, start, options, record, x, reference)
             if marched is not None and marched.status != "Stalled":
@@ -564,8 +567,9 @@ class DesignProblem:
                                    reference: Callable[[], np.ndarray] | None = None
                                    ) -> "_Outcome | None":
         """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x
-        (or, where x breaks a constraint, x moved toward ``reference()``), every step
-        recorded; None when it has no admissible start (no step taken)."""
+        (or, where x breaks a constraint, x moved toward ``reference()``, or restored), every
+        step recorded; None when it reached no admissible point (its restoration steps, if
+        any, counted)."""
         deadline = None if options.time_limit is None else record.t0 + options.time_limit
         t1 = time.perf_counter()
         manifold = reduced.Manifold(nlp, options.boundary_knots or None)  # like IPOPT's build
@@ -574,11 +578,12 @@ class DesignProblem:
             nlp, x, options.damping, options.max_iter - record.iterations, deadline=deadline,
             stop=self._fit_reached(nlp, start, options), callback=record.log,
             tol=options.tol, manifold=manifold, reference=reference)
+        record.iterations += out.iterations
+        record.marched_iterations += out.iterations
+        record.restoration_iterations += out.restored
         if out.status == "Inadmissible_Start":
             return None
         record.start_moved = out.moved or record.start_moved  # later stages start admissible
-        record.iterations += out.iterations
-        record.marched_iterations += out.iterations
         status = out.status
         if status == "Stalled" and record.iterations >= options.max_iter:
             status = "Maximum_Iterations_Exceeded"
@@ -925,6 +930,7 @@ class _Record:
     marched_iterations: int = 0
     build_time: float = 0.0
     start_moved: float = 0.0
+    restoration_iterations: int = 0
 
     def log(self, objective: float, violation: float) -> None:
         """Record one iteration (of Levenberg-Marquardt; IPOPT's: :class:`_IterationLog`)."""
@@ -945,7 +951,7 @@ class _Record:
             solver=options.solver, transcription=options.transcription,
             hessian=options.hessian, gauss_newton_iterations=self.gauss_newton_iterations,
             marched_iterations=self.marched_iterations, start_moved=self.start_moved,
-            history=self.history)
+            restoration_iterations=self.restoration_iterations, history=self.history)
 
 
 @dataclass(frozen=True)

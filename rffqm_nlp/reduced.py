@@ -61,6 +61,19 @@ it when it predicted the last step's reduction better than J' J alone did (NL2SO
 choice), and when J' J + B + lam M is positive definite. Where the residuals do not vanish
 at the optimum Gauss-Newton converges only linearly; B speeds up the end.
 
+A start that marches but breaks a constraint (a Miura start whose sides break the minimum
+length, a warm start carried from a coarser design that no move toward the reference
+repairs, :func:`admissible_toward`, or a clearance round's last design with its new rows,
+:mod:`rffqm_nlp.clearance`) is restored first: the steps are the same, whose QP then asks
+the broken rows' linearisation to reach their bounds, but a trial is judged by its largest
+violation alone, the loss free to rise. It is taken where it holds every constraint (after
+up to :data:`CORRECTIONS` corrections, as above) or brings the violation below
+:data:`RESTORED` times the last point's; lam then falls by 3, and grows by Nielsen's factor
+after a trial not taken. No optimality test is made before a point holds every constraint;
+from there the run goes on as from an admissible start. Where no such point is reached
+(lam above :data:`MAX_DAMPING`, ``max_iter``, the deadline) the run ends
+"Inadmissible_Start" with the start as given (the design then hands it to IPOPT).
+
 The run stops with status "Solve_Succeeded" when the first-order optimality conditions of
 the reduced problem hold at a marched iterate (:func:`_kkt_error`): the gradient J' r
 less the linearised active inequalities' multipliers (of the right sign, zero where the
@@ -131,6 +144,9 @@ SECANT_PAIRS = 3
 #: the fractions of the way from an inadmissible start's boundary data to the reference's
 #: tried in turn (:func:`admissible_toward`)
 TOWARD_REFERENCE = (0.1, 0.25, 0.5, 1.0)
+#: a restoration step that still breaks a constraint is taken where it brings the largest
+#: violation below this fraction of the last point's
+RESTORED = 0.5
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
@@ -142,11 +158,14 @@ class Outcome:
     the last point tested (None when none was). Statuses: "Solve_Succeeded" (first-order
     optimal to ``tol``), "Fit_Reached" (``stop`` held), "Stalled" (no step lowers the
     loss), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
-    "Inadmissible_Start" (the start, re-marched, breaks a constraint or does not march: no
-    step was taken, ``x`` is the start as given and ``objective`` None). ``scale``: the
+    "Inadmissible_Start" (the start, re-marched, does not march, or breaks a constraint
+    and its restoration did not reach an admissible point: ``x`` is the start as given,
+    ``objective`` None, ``iterations`` the restoration steps taken). ``scale``: the
     optimality error's, max(1, |J' r at the start| / 100) (None before the first model).
     ``moved``: the fraction of the way to the reference that an inadmissible start's
-    boundary data were moved before the run (:func:`admissible_toward`; 0: not moved)."""
+    boundary data were moved before the run (:func:`admissible_toward`; 0: not moved).
+    ``restored``: the restoration steps (of ``iterations``) from a start that broke a
+    constraint to the first admissible point (0: it started admissible)."""
 
     x: np.ndarray
     objective: float | None
@@ -155,6 +174,7 @@ class Outcome:
     kkt_error: float | None = None
     scale: float | None = None
     moved: float = 0.0
+    restored: int = 0
 
     @property
     def success(self) -> bool:
@@ -965,11 +985,16 @@ class Manifold:
             return None
         return _Point(x=x, r=r, g=g)
 
-    def admissible(self, x: np.ndarray) -> _Point | None:
-        """The point of x (n,) re-marched where it marches, is finite and holds every
-        constraint and bound to :data:`FEASIBLE`; None otherwise."""
+    def marched(self, x: np.ndarray) -> _Point | None:
+        """The point of x (n,) re-marched, whatever constraints it breaks; None where it
+        does not march or is not finite."""
         marched = self.nlp.project(np.asarray(x, dtype=float))
-        p = None if marched is None else self.point(marched)
+        return None if marched is None else self.point(marched)
+
+    def admissible(self, x: np.ndarray) -> _Point | None:
+        """:meth:`marched` where it holds every constraint and bound to :data:`FEASIBLE`;
+        None otherwise."""
+        p = self.marched(x)
         return p if p is not None and self.violation(p) <= FEASIBLE else None
 
     def linearize(self, p: _Point, metric: bool = True) -> _Linearization | None:
@@ -1320,8 +1345,10 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build);
     ``reference``: gives an admissible point (n,), called only where x is not admissible:
     the run then starts from x's boundary data moved toward the reference's
-    (:func:`admissible_toward`, ``Outcome.moved``), and ends "Inadmissible_Start" only
-    where no fraction of :data:`TOWARD_REFERENCE` is admissible.
+    (:func:`admissible_toward`, ``Outcome.moved``) where a fraction of
+    :data:`TOWARD_REFERENCE` is admissible. Otherwise a start that marches but breaks a
+    constraint is restored (module docstring, ``Outcome.restored``); the run ends
+    "Inadmissible_Start" where x does not march or the restoration fails.
 
     With a coarse basis (:attr:`Manifold.coarse`) the steps are taken in it first; where
     that run ends optimal in it or stalls, the manifold is refined and the run goes on in
@@ -1329,20 +1356,22 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     "Solve_Succeeded" always means the whole design's optimality conditions.
     """
     man = Manifold(nlp) if manifold is None else manifold
+    x, moved = np.asarray(x, dtype=float), None
     with man.blas_threads():
-        out = _levenberg_marquardt(man, x, damping, max_iter, deadline, stop, callback, tol)
-        if out.status == "Inadmissible_Start" and reference is not None:
-            moved = admissible_toward(man, np.asarray(x, dtype=float), reference())
-            if moved is not None:
-                out = replace(_levenberg_marquardt(man, moved[0], damping, max_iter, deadline,
-                                                   stop, callback, tol), moved=moved[1])
+        if reference is not None and man.admissible(x) is None:
+            moved = admissible_toward(man, x, reference())
+        out = _levenberg_marquardt(man, x if moved is None else moved[0], damping, max_iter,
+                                   deadline, stop, callback, tol)
+        if moved is not None:
+            out = replace(out, moved=moved[1])
     if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled"):
         return out
     man.refine()
     with man.blas_threads():
         rest = _levenberg_marquardt(man, out.x, damping, max_iter - out.iterations, deadline,
                                     stop, callback, tol, announce=False, scale=out.scale)
-    return replace(rest, iterations=out.iterations + rest.iterations, moved=out.moved)
+    return replace(rest, iterations=out.iterations + rest.iterations, moved=out.moved,
+                   restored=out.restored)
 
 
 def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
@@ -1370,16 +1399,19 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                          tol: float, announce: bool = True,
                          scale: float | None = None) -> Outcome:
     """:func:`levenberg_marquardt` on ``man`` (``announce``: the callback at the start
-    too; ``scale``: the optimality error's, None: from the first gradient)."""
+    too; ``scale``: the optimality error's, None: from the first gradient), a start that
+    breaks a constraint restored first."""
     nlp = man.nlp
-    p = man.admissible(x)
+    x = np.asarray(x, dtype=float)
+    p = man.marched(x)
     if p is None:
-        return Outcome(x=np.asarray(x, dtype=float), objective=None, iterations=0,
-                       status="Inadmissible_Start")
+        return Outcome(x=x, objective=None, iterations=0, status="Inadmissible_Start")
+    infeasibility = man.violation(p)
+    restoring = infeasibility > FEASIBLE
     if callback is not None and announce:
-        callback(p.objective, man.violation(p))
+        callback(p.objective, infeasibility)
     steps = _Steps(man)
-    lam, nu, it = float(damping), 2.0, 0
+    lam, nu, it, restored = float(damping), 2.0, 0, 0
     B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
     augmented, error, last, kept = False, None, None, None
@@ -1406,7 +1438,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
         while lam <= MAX_DAMPING:
             trial, step = None, steps(m, lam, shift)
             if step is not None:
-                if first:
+                if first and not restoring:
                     error, first = _kkt_error(m, steps, step) / scale, False
                     if error <= tol:
                         break
@@ -1415,8 +1447,9 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                 xt = p.x.copy()
                 xt[man.design] += man.basis @ dd
                 xt = nlp.project(xt)
-                trial = None if xt is None or predicted <= 0 else man.point(xt)
-            if trial is not None and trial.objective < p.objective:
+                trial = (None if xt is None or (predicted <= 0 and not restoring)
+                         else man.point(xt))
+            if trial is not None and (restoring or trial.objective < p.objective):
                 violation = man.violation(trial)
                 if violation <= FEASIBLE:
                     break
@@ -1424,6 +1457,8 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                     shift += _linearization_error(man, m, steps, dd, p, trial)
                     corrections += 1
                     continue
+                if restoring and violation < RESTORED * infeasibility:
+                    break
             if step is not None and predicted > 0 and xt is None:  # left the march's domain
                 lam *= DOMAIN_DAMPING
             else:
@@ -1432,22 +1467,30 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
         else:
             status = "Stalled"
             break
-        if error <= tol:
+        if error is not None and error <= tol:
             status = "Solve_Succeeded"
             break
         actual = p.objective - trial.objective
-        rho = actual / predicted
-        lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
+        if restoring:  # the loss may rise: the step is judged by the violation alone
+            infeasibility, restored = violation, restored + 1
+            restoring = violation > FEASIBLE
+            lam, nu = lam / 3, 2.0
+        else:
+            rho = actual / predicted
+            lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
         last = _Last(m, steps, step, dd, trial)
         augmented = last.augmented_predicts_better(actual, B)
         p, it = trial, it + 1
         if callback is not None:
             callback(p.objective, violation)
-        if stop is not None and stop(p.x):
+        if stop is not None and not restoring and stop(p.x):
             status = "Fit_Reached"
             break
+    if restoring:  # no admissible point reached: the start as given
+        return Outcome(x=x, objective=None, iterations=it, status="Inadmissible_Start",
+                       restored=it)
     return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
-                   kkt_error=error, scale=scale)
+                   kkt_error=error, scale=scale, restored=restored)
 
 
 @functools.cache

@@ -109,6 +109,10 @@ class SolveStats:
     * ``start_moved``: where a warm start broke a constraint, the fraction of the way to the
       Miura's boundary data that Levenberg-Marquardt moved it before its first step (0: it
       started from the warm start as given);
+    * ``restoration_iterations``: those of ``marched_iterations`` that Levenberg-Marquardt
+      took from a start that broke a constraint toward one that holds them all (the Miura
+      start where ``min_length`` is above its smallest side, a warm start that no move
+      repaired, a clearance round's start; :mod:`rffqm_nlp.reduced`);
     * ``build_time``, ``solve_time``: seconds spent building the NLPs and solvers, and the rest;
     * ``objective``: the final objective (the loss);
     * ``solver``, ``transcription``, ``hessian``: the options they ran with;
@@ -130,6 +134,7 @@ class SolveStats:
     gauss_newton_iterations: int = 0
     marched_iterations: int = 0
     start_moved: float = 0.0
+    restoration_iterations: int = 0
     history: dict[str, list[float]] = field(
         default_factory=lambda: {"iter": [], "objective": [], "inf_pr": [], "elapsed": []})
     multistart: dict[str, Any] | None = None

@@ -138,12 +138,16 @@ def test_separating_axis_of_stacked_panels_is_their_normal():
 
 
 def test_min_clearance_keeps_the_distance_it_promises(result, options):
+    """... solved by Levenberg-Marquardt alone: each round's start, which its new rows
+    break, restored first."""
     free = min_distance(result.pattern, result.omega)
     clearance = 1.2 * free
     kept = problem(min_clearance=clearance).solve(options)
     assert kept.stats.success
     assert min_distance(kept.pattern, kept.omega) >= clearance - 1e-6
     assert kept.problem["design"]["min_clearance"] == clearance
+    assert kept.stats.marched_iterations == kept.stats.iterations
+    assert kept.stats.restoration_iterations > 0
 
 
 def test_impossible_min_clearance_ends_clearance_not_met(result, options):

@@ -635,18 +635,53 @@ def test_invalid_solver_options_raise_input_error(kw):
         small("sphere_cap", **kw)
 
 
-def test_an_inadmissible_start_takes_no_step_and_ipopt_solves_from_it(manifold):
+def test_a_start_that_does_not_march_takes_no_step(manifold):
     _, man = manifold
     x = man.nlp.x0.copy()
     x[man.nlp.groups["angles"]] = 3.0  # every boundary angle near pi: does not march
     out = reduced.levenberg_marquardt(man.nlp, x, 0.03, 10)
-    assert out.status == "Inadmissible_Start" and out.iterations == 0
+    assert out.status == "Inadmissible_Start" and out.iterations == out.restored == 0
     np.testing.assert_array_equal(out.x, x)
-    # a Miura start whose sides break min_length (its smallest is 0.82 of the mean):
-    # IPOPT solves from it as it would without the Levenberg-Marquardt solver
-    prob, opts = small("quarter_vase", min_length=0.9)
+
+
+@pytest.fixture(scope="module")
+def short_sides():
+    """The 8 x 8 quarter vase with min_length 0.9: its Miura start's smallest side is 0.82
+    of the mean, so the start marches but breaks a row."""
+    return small("quarter_vase", min_length=0.9)
+
+
+def test_a_start_that_breaks_a_row_is_restored_then_solved_to_ipopts_optimum(short_sides):
+    """Restoration steps, each bringing the largest violation below RESTORED times the last
+    or to FEASIBLE (the loss free to rise), then admissible steps to the optimality
+    conditions, by Levenberg-Marquardt alone, at IPOPT's optimum from the same start."""
+    prob, opts = short_sides
     nlp = prob.transcribe()
-    assert reduced.levenberg_marquardt(nlp, nlp.x0, 0.03, 10).status == "Inadmissible_Start"
+    man = reduced.Manifold(nlp)
+    assert man.violation(man.point(nlp.project(nlp.x0))) > 1e-2
+    opts = replace(opts, tol=1e-9)
+    res = prob.solve(opts)
+    stats = res.stats
+    assert stats.status == "Solve_Succeeded"
+    assert stats.marched_iterations == stats.iterations > stats.restoration_iterations > 0
+    violation = np.array(stats.history["inf_pr"])
+    k = stats.restoration_iterations
+    assert np.all(violation[k:] <= reduced.FEASIBLE) and np.all(violation[:k] > reduced.FEASIBLE)
+    assert np.all((violation[1:k + 1] < reduced.RESTORED * violation[:k])
+                  | (violation[1:k + 1] <= reduced.FEASIBLE))
+    assert res.fit.min_side_over_mean >= 0.9 * (1 - 1e-6)
+    assert rq.SolveStats.from_dict(stats.to_dict()).restoration_iterations == k
+    ipopt = prob.solve(replace(opts, solver="ipopt"))
+    assert stats.objective == pytest.approx(ipopt.stats.objective, rel=1e-6)
+
+
+def test_a_failed_restoration_hands_the_start_as_given_to_ipopt(short_sides, monkeypatch):
+    prob, opts = short_sides
+    nlp = prob.transcribe()
+    monkeypatch.setattr(reduced._Steps, "__call__", lambda self, m, lam, shift: None)
+    out = reduced.levenberg_marquardt(nlp, nlp.x0, 0.03, 10)
+    assert out.status == "Inadmissible_Start" and out.iterations == out.restored == 0
+    np.testing.assert_array_equal(out.x, nlp.x0)
     res = prob.solve(opts)
     assert res.stats.marched_iterations == 0 and res.stats.status == "Solve_Succeeded"
     assert res.fit.min_side_over_mean >= 0.9 * (1 - 1e-6)
