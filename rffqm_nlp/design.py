@@ -569,7 +569,8 @@ class DesignProblem:
         """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x
         (or, where x breaks a constraint, x moved toward ``reference()``, or restored), every
         step recorded; None when it reached no admissible point (its restoration steps, if
-        any, counted)."""
+        any, counted), unless the iterations or the time ran out in the restoration
+        (:meth:`_restoration_cut_short`)."""
         deadline = None if options.time_limit is None else record.t0 + options.time_limit
         t1 = time.perf_counter()
         manifold = reduced.Manifold(nlp, options.boundary_knots or None)  # like IPOPT's build
@@ -582,13 +583,28 @@ class DesignProblem:
         record.marched_iterations += out.iterations
         record.restoration_iterations += out.restored
         if out.status == "Inadmissible_Start":
-            return None
+            return self._restoration_cut_short(options, record, x, deadline)
         record.start_moved = out.moved or record.start_moved  # later stages start admissible
         status = out.status
         if status == "Stalled" and record.iterations >= options.max_iter:
             status = "Maximum_Iterations_Exceeded"
         return _Outcome(x=out.x, status=status, success=out.success,
                         objective=out.objective, best=out.x)
+
+    @staticmethod
+    def _restoration_cut_short(options: SolveOptions, record: "_Record", x: np.ndarray,
+                               deadline: float | None) -> "_Outcome | None":
+        """Where Levenberg-Marquardt reached no admissible point: a failure with its status
+        when ``max_iter`` or ``time_limit`` ran out during its restoration (no admissible
+        point to report as the best; IPOPT would have nothing left), else None (IPOPT
+        starts from x)."""
+        if record.iterations >= options.max_iter:
+            status = "Maximum_Iterations_Exceeded"
+        elif deadline is not None and time.perf_counter() > deadline:
+            status = "Maximum_WallTime_Exceeded"
+        else:
+            return None
+        return _Outcome(x=x, status=status, success=False, objective=None, best=None)
 
     def _solve_ipopt(self, nlp: transcription.NLP, start: Start, options: SolveOptions,
                      record: "_Record", x: np.ndarray, warm: bool,

@@ -67,12 +67,16 @@ repairs, :func:`admissible_toward`, or a clearance round's last design with its 
 :mod:`rffqm_nlp.clearance`) is restored first: the steps are the same, whose QP then asks
 the broken rows' linearisation to reach their bounds, but a trial is judged by its largest
 violation alone, the loss free to rise. It is taken where it holds every constraint (after
-up to :data:`CORRECTIONS` corrections, as above) or brings the violation below
-:data:`RESTORED` times the last point's; lam then falls by 3, and grows by Nielsen's factor
-after a trial not taken. No optimality test is made before a point holds every constraint;
-from there the run goes on as from an admissible start. Where no such point is reached
+up to :data:`CORRECTIONS` corrections, as above) or, failing that, where it (the best such
+trial) brought the violation down by at least :data:`RESTORED` of what the QP asked; lam
+then falls by 3, and after a trial not taken it grows by Nielsen's factor and the QP asks
+the broken rows for half of their remaining way only (:func:`_partial_target`: where the
+QP forces the rows, a larger lam hardly shortens the step). Restoration steps give the
+secant term no pair (their multipliers force the rows), and no optimality test is made
+before a point holds every constraint; from there the run goes on as from an admissible
+start, its optimality error scaled by the gradient there. Where no such point is reached
 (lam above :data:`MAX_DAMPING`, ``max_iter``, the deadline) the run ends
-"Inadmissible_Start" with the start as given (the design then hands it to IPOPT).
+"Inadmissible_Start" with the start as given and the restoration steps counted.
 
 The run stops with status "Solve_Succeeded" when the first-order optimality conditions of
 the reduced problem hold at a marched iterate (:func:`_kkt_error`): the gradient J' r
@@ -145,7 +149,7 @@ SECANT_PAIRS = 3
 #: tried in turn (:func:`admissible_toward`)
 TOWARD_REFERENCE = (0.1, 0.25, 0.5, 1.0)
 #: a restoration step that still breaks a constraint is taken where it brings the largest
-#: violation below this fraction of the last point's
+#: violation down by at least this fraction of the part its QP asked for
 RESTORED = 0.5
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
@@ -1353,7 +1357,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     With a coarse basis (:attr:`Manifold.coarse`) the steps are taken in it first; where
     that run ends optimal in it or stalls, the manifold is refined and the run goes on in
     the whole design from there, its optimality error scaled as the first run's, so
-    "Solve_Succeeded" always means the whole design's optimality conditions.
+    "Solve_Succeeded" always means the whole design's optimality conditions; where its
+    restoration failed, the run restores the start again in the whole design.
     """
     man = Manifold(nlp) if manifold is None else manifold
     x, moved = np.asarray(x, dtype=float), None
@@ -1364,14 +1369,17 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
                                    deadline, stop, callback, tol)
         if moved is not None:
             out = replace(out, moved=moved[1])
-    if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled"):
+    if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled",
+                                            "Inadmissible_Start"):
         return out
-    man.refine()
+    if out.status == "Inadmissible_Start" and man.marched(out.x) is None:
+        return out  # a start that does not march: the whole design would not help
+    man.refine()  # where the restoration failed in the basis, it restarts in the whole design
     with man.blas_threads():
         rest = _levenberg_marquardt(man, out.x, damping, max_iter - out.iterations, deadline,
                                     stop, callback, tol, announce=False, scale=out.scale)
     return replace(rest, iterations=out.iterations + rest.iterations, moved=out.moved,
-                   restored=out.restored)
+                   restored=out.restored + rest.restored)
 
 
 def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
@@ -1411,7 +1419,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
     if callback is not None and announce:
         callback(p.objective, infeasibility)
     steps = _Steps(man)
-    lam, nu, it, restored = float(damping), 2.0, 0, 0
+    lam, nu, it, restored, reach = float(damping), 2.0, 0, 0, 1.0
     B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
     augmented, error, last, kept = False, None, None, None
@@ -1429,12 +1437,13 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
             B = _secant_term(pairs, man.basis.shape[1])
         if augmented and _positive_definite(m.H + B + lam * m.M):
             m.H = m.H + B
-        scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)
+        if not restoring:
+            scale = scale or max(1.0, float(np.max(np.abs(m.grad))) / 100)
         if deadline is not None and time.perf_counter() > deadline:
             status = "Maximum_WallTime_Exceeded"
             break
-        shift = np.zeros(m.lower.size)
-        corrections, first = 0, True
+        base = _partial_target(m, reach if restoring else 1.0)
+        shift, corrections, first, candidate = base.copy(), 0, True, None
         while lam <= MAX_DAMPING:
             trial, step = None, steps(m, lam, shift)
             if step is not None:
@@ -1453,17 +1462,24 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                 violation = man.violation(trial)
                 if violation <= FEASIBLE:
                     break
+                if (restoring and violation < (1 - RESTORED * reach) * infeasibility
+                        and (candidate is None or violation < candidate[3])):
+                    candidate = (trial, step, dd, violation)  # taken unless a correction holds
                 if corrections < CORRECTIONS:
                     shift += _linearization_error(man, m, steps, dd, p, trial)
                     corrections += 1
                     continue
-                if restoring and violation < RESTORED * infeasibility:
-                    break
-            if step is not None and predicted > 0 and xt is None:  # left the march's domain
-                lam *= DOMAIN_DAMPING
+            if candidate is not None:
+                trial, step, dd, violation = candidate
+                break
+            if step is not None and (predicted > 0 or restoring) and xt is None:
+                lam *= DOMAIN_DAMPING  # left the march's domain
             else:
                 lam, nu = lam * nu, 2 * nu
-            shift[:], corrections = 0.0, 0
+            if restoring:  # a larger lam hardly shortens a step the QP forces: ask for less
+                reach /= 2
+                base = _partial_target(m, reach)
+            shift, corrections = base.copy(), 0
         else:
             status = "Stalled"
             break
@@ -1472,14 +1488,15 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
             break
         actual = p.objective - trial.objective
         if restoring:  # the loss may rise: the step is judged by the violation alone
-            infeasibility, restored = violation, restored + 1
+            infeasibility, restored, reach = violation, restored + 1, 1.0
             restoring = violation > FEASIBLE
             lam, nu = lam / 3, 2.0
+            last, augmented = None, False  # its QP's multipliers force rows: no secant pair
         else:
             rho = actual / predicted
             lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
-        last = _Last(m, steps, step, dd, trial)
-        augmented = last.augmented_predicts_better(actual, B)
+            last = _Last(m, steps, step, dd, trial)
+            augmented = last.augmented_predicts_better(actual, B)
         p, it = trial, it + 1
         if callback is not None:
             callback(p.objective, violation)
@@ -1491,6 +1508,14 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
                        restored=it)
     return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
                    kkt_error=error, scale=scale, restored=restored)
+
+
+def _partial_target(m: _Model, reach: float) -> np.ndarray:
+    """The shift of the step's inequality rows (n_rows,) that asks each row broken at the
+    model's point for only ``reach`` of its way back to its bound (:meth:`_Steps.__call__`
+    holds lower + shift <= A dd <= upper - shift); zero on the rows that hold."""
+    gap = np.maximum(m.lower, 0.0) + np.maximum(-m.upper, 0.0)
+    return -(1.0 - reach) * gap
 
 
 @functools.cache
