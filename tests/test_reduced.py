@@ -652,9 +652,9 @@ def short_sides():
 
 
 def test_a_start_that_breaks_a_row_is_restored_then_solved_to_ipopts_optimum(short_sides):
-    """Restoration steps, each bringing the largest violation below RESTORED times the last
-    or to FEASIBLE (the loss free to rise), then admissible steps to the optimality
-    conditions, by Levenberg-Marquardt alone, at IPOPT's optimum from the same start."""
+    """Restoration steps (the loss free to rise) until every row holds, then admissible
+    steps to the optimality conditions, by Levenberg-Marquardt alone, at IPOPT's optimum
+    from the same start."""
     prob, opts = short_sides
     nlp = prob.transcribe()
     man = reduced.Manifold(nlp)
