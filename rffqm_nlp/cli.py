@@ -225,6 +225,7 @@ def design(
     in the pattern's frame (x_a^11 = 0); result.json and view.html hold the folded state
     aligned onto the target.
     """
+    from . import viz
     from .design import check_memory, load_design
 
     with user_errors():
@@ -235,6 +236,7 @@ def design(
             options = dataclasses.replace(options, max_iter=max_iter)
         check_memory(problem, options)     # sizes this machine cannot hold: before any work
         check_out_dir(out, force)          # before the solve: never waste a long solve
+        viz.start_rendering_probe()        # beside the solve, for render.png and folding.gif
         result = _solve(problem, options, quiet)
         with replace_folder(out) as tmp:
             _write_design(tmp, result, problem)

@@ -141,11 +141,16 @@ def _no_date(suffix: str) -> dict | None:
 
 
 # --------------------------------------------------------------------------- pyvista
+def _offscreen() -> None:
+    """With no display, VTK goes straight to EGL (falling back to OSMesa) instead of trying
+    X: set for this process and the probe's child."""
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
 def _pyvista():
     """Import pyvista for off-screen use, or raise an ImportError naming the extra."""
-    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        # No display: go straight to EGL (VTK falls back to OSMesa) instead of trying X.
-        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    _offscreen()
     try:
         if importlib.util.find_spec("imageio") is None:  # checked here: the message names the extra
             raise ImportError("No module named 'imageio'")
@@ -157,25 +162,45 @@ def _pyvista():
     return pv
 
 
+#: the probe's child process, started and not yet read (:func:`start_rendering_probe`)
+_probe: subprocess.Popen | None = None
+
+
+def start_rendering_probe() -> None:
+    """Start :func:`rendering_available`'s probe, a child process, now, so that it runs
+    beside other work (``rffqm design`` starts it before its solve); nothing where it is
+    running, or where pyvista or imageio is missing."""
+    global _probe
+    if _probe is None and all(importlib.util.find_spec(m) for m in ("pyvista", "imageio")):
+        _offscreen()
+        _probe = subprocess.Popen([sys.executable, "-c", _PROBE], stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.PIPE, text=True)
+
+
 @lru_cache(maxsize=1)
 def rendering_available() -> tuple[bool, str]:
     """(True, "") when off-screen pyvista rendering works, else (False, reason).
 
-    Tries one tiny render in a child process (once per session): a missing EGL/OSMesa
-    library can abort the process instead of raising.
+    Tries one tiny render in a child process (once per session; the one
+    :func:`start_rendering_probe` started, if any): a missing EGL/OSMesa library can abort
+    the process instead of raising.
     """
+    global _probe
     try:
         _pyvista()
     except ImportError as exc:
         return False, str(exc)
+    start_rendering_probe()
+    probe, _probe = _probe, None
     try:
-        run = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
-                             timeout=120)
+        _, stderr = probe.communicate(timeout=120)
     except subprocess.TimeoutExpired:
+        probe.kill()
+        probe.communicate()
         return False, "off-screen rendering probe timed out"
-    if run.returncode != 0:
-        tail = (run.stderr.strip().splitlines() or ["no message"])[-1]
-        return False, (f"off-screen rendering failed (exit {run.returncode}: {tail}); "
+    if probe.returncode != 0:
+        tail = (stderr.strip().splitlines() or ["no message"])[-1]
+        return False, (f"off-screen rendering failed (exit {probe.returncode}: {tail}); "
                        "install EGL or OSMesa (Debian: libegl1 libegl-mesa0 libgl1-mesa-dri)")
     return True, ""
 

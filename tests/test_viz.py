@@ -82,6 +82,30 @@ def test_missing_pyvista_names_the_extra(monkeypatch, pat, tmp_path):
 
 
 # --------------------------------------------------------------------------- pyvista
+def test_a_probe_started_ahead_is_the_one_rendering_available_reads(monkeypatch):
+    """start_rendering_probe starts the child once; rendering_available (asked afresh)
+    waits for that child, reads its answer and starts none of its own; a failing child's
+    last stderr line is the reason."""
+    started = []
+    real = viz.subprocess.Popen
+    monkeypatch.setattr(viz.subprocess, "Popen", lambda *a, **kw: started.append(a) or real(
+        *a, **kw))
+    monkeypatch.setattr(viz, "_probe", None)
+    viz.rendering_available.cache_clear()
+    try:
+        viz.start_rendering_probe()
+        viz.start_rendering_probe()
+        assert len(started) == 1 and viz._probe is not None
+        assert viz.rendering_available() == (True, "")
+        assert len(started) == 1 and viz._probe is None
+        viz.rendering_available.cache_clear()
+        monkeypatch.setattr(viz, "_PROBE", "raise SystemExit('no GL here')")
+        ok, reason = viz.rendering_available()
+        assert not ok and "exit 1: no GL here" in reason and len(started) == 2
+    finally:
+        viz.rendering_available.cache_clear()
+
+
 def _check_image(path, size):
     img = iio.imread(path)
     assert img.shape[:2] == (size[1], size[0])
