@@ -59,10 +59,9 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
     sys.path.insert(0, str(ROOT))
 
 from common import (RESULTS, TARGETS, Run, add_smoke, export_package, fmt,  # noqa: E402
-                    run_child, smoke_dir, solve_in_child, target_problem, write_table)
-from rffqm_nlp import DesignProblem, numpy_model, surfaces  # noqa: E402
-from rffqm_nlp.errors import RffqmError  # noqa: E402
-from rffqm_nlp.results import SolveStats  # noqa: E402
+                    run_child, smoke_dir, solve_in_child, solve_problem, target_problem,
+                    write_table)
+from rffqm_nlp import DesignProblem, SolveOptions, numpy_model, surfaces  # noqa: E402
 from rffqm_nlp.surfaces import Surface  # noqa: E402
 
 #: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
@@ -127,18 +126,8 @@ def solve_row(name: str, n: int, path: str, threads: int, package: Path) -> dict
 
 
 def solve_surface(name: str, n: int) -> dict:
-    """A user surface's default solve at n x n panels: its statistics, fit and CPU time (a
-    failed solve: its status and error, and the statistics it has)."""
-    problem = problem_of(name, n)
-    c0 = time.process_time()
-    try:
-        res = problem.solve()
-        row = {**res.stats.to_dict(), "fit": res.fit.to_dict()}
-    except RffqmError as exc:  # a failed run is a result here
-        stats = getattr(exc, "stats", None)
-        row = {**(stats.to_dict() if isinstance(stats, SolveStats) else {}),
-               "status": getattr(exc, "status", None) or type(exc).__name__, "error": str(exc)}
-    return {"target": name, **row, "cpu": time.process_time() - c0}
+    """A user surface's default solve at n x n panels (:func:`common.solve_problem`'s row)."""
+    return solve_problem(problem_of(name, n), SolveOptions(), {"n": n, "target": name})
 
 
 def report(row: dict) -> dict:

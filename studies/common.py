@@ -71,16 +71,23 @@ def run_child(script: str | Path, *argv: str, env: dict[str, str] | None = None)
 def solve_design(target: str, n: int, design: dict | None = None,
                  solve: dict | None = None) -> dict:
     """Solve targets/<target>.toml at n x n panels with its [design] and [solve] tables
-    overridden by ``design`` and ``solve``; a JSON-ready row: the statistics (``history``:
-    the iteration log), ``fit`` (None when the solve failed), ``x`` (the answer, or the
-    last iterate of a failed solve, or None), ``wall``/``cpu`` seconds of the solve, and
-    peak memory (``rss0_mb`` after the imports, ``peak_rss_mb`` at the end)."""
+    overridden by ``design`` and ``solve``: :func:`solve_problem`'s row."""
     rss0 = peak_rss_mb()
     problem, options = target_problem(target, n, **(design or {}))
-    options = replace(options, **(solve or {}))
-    row: dict[str, Any] = {"n": n, "target": target, "transcription": options.transcription,
-                           "solver": options.solver, "hessian": options.hessian,
-                           "fit": None, "x": None, "error": None}
+    return solve_problem(problem, replace(options, **(solve or {})),
+                         {"n": n, "target": target}, rss0)
+
+
+def solve_problem(problem: DesignProblem, options: SolveOptions, row: dict[str, Any],
+                  rss0: float | None = None) -> dict:
+    """``problem.solve(options)`` as a JSON-ready row, ``row`` (what names the problem) and:
+    the options' solver, the statistics (``history``: the iteration log), ``fit`` (None
+    when the solve failed), ``x`` (the answer, or the last iterate of a failed solve, or
+    None), ``wall``/``cpu`` seconds of the solve, and peak memory (``rss0_mb``, given or
+    now, after the imports; ``peak_rss_mb`` at the end)."""
+    rss0 = peak_rss_mb() if rss0 is None else rss0
+    row = {**row, "transcription": options.transcription, "solver": options.solver,
+           "hessian": options.hessian, "fit": None, "x": None, "error": None}
     t0, c0 = time.perf_counter(), time.process_time()
     stats = None
     try:
