@@ -1442,7 +1442,7 @@ def _levenberg_marquardt(man: Manifold, x: np.ndarray, damping: float, max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = "Maximum_WallTime_Exceeded"
             break
-        base = _partial_target(m, reach if restoring else 1.0)
+        base = _partial_target(m, reach) if restoring else np.zeros(m.lower.size)
         shift, corrections, first, candidate = base.copy(), 0, True, None
         while lam <= MAX_DAMPING:
             trial, step = None, steps(m, lam, shift)
