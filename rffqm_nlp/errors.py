@@ -2,20 +2,63 @@
 
 from __future__ import annotations
 
+import re
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from .results import SolveStats
 
 
+#: Longest word (a run without spaces, e.g. a path) a message shows whole; a longer one
+#: keeps its start and its end (a path's file name) around its length.
+MAX_WORD = 120
+#: Longest message: a longer one is cut and says how long it was.
+MAX_MESSAGE = 1000
+#: Characters a message never shows as they are (they could move the cursor, recolour or
+#: clear a terminal, or reorder the text): C0 and C1 controls, DEL, and Unicode's
+#: bidirectional and zero-width format characters.
+_UNSAFE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e"
+                     "\u2060-\u2069\ufeff]")
+
+
+def safe_text(text: str) -> str:
+    """``text`` fit for a user's terminal or a log line: on one line (runs of whitespace as
+    one space), unsafe characters (:data:`_UNSAFE`) escaped as ``\\xNN``/``\\uNNNN``,
+    every word longer than :data:`MAX_WORD` cut in its middle, the whole cut at
+    :data:`MAX_MESSAGE` characters. The one sanitizer of everything rffqm_nlp says: every
+    :class:`RffqmError` message goes through it."""
+    text = _UNSAFE.sub(_escape, str(text))
+    words = [_cut_word(word) for word in text.split()]
+    text = " ".join(words)
+    if len(text) > MAX_MESSAGE:
+        text = f"{text[:MAX_MESSAGE - 40]} ... (cut, {len(text)} characters)"
+    return text
+
+
+def _escape(match: re.Match) -> str:
+    code = ord(match[0])
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def _cut_word(word: str) -> str:
+    if len(word) <= MAX_WORD:
+        return word
+    keep = (MAX_WORD - 30) // 2
+    return f"{word[:keep]}...({len(word)} characters)...{word[-keep:]}"
+
+
 class RffqmError(Exception):
-    """Base class of every error raised on purpose by rffqm_nlp."""
+    """Base class of every error raised on purpose by rffqm_nlp; its message is made safe
+    for a terminal by :func:`safe_text`."""
+
+    def __init__(self, message: Any = "", *args: Any):
+        super().__init__(safe_text(message), *args)
 
 
 def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (runs of whitespace as one space); the name of its
-    type when it has no message."""
-    return " ".join(str(exc).split()) or type(exc).__name__
+    """The message of ``exc`` through :func:`safe_text` (one line, no control characters,
+    long words cut); the name of its type when it has no message."""
+    return safe_text(str(exc)) or type(exc).__name__
 
 
 class InputError(RffqmError, ValueError):
