@@ -7,12 +7,13 @@ set -euo pipefail
 cd "$(dirname "$0")"
 if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = "0" ]; then
     # chromium: the browser of tests/test_view_browser.py (Playwright drives it; never
-    # `playwright install`).
-    if ! dpkg -s libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 chromium \
-            >/dev/null 2>&1; then
+    # `playwright install`); gcc: builds the shared library of tests/test_ipopt_options.py.
+    if ! dpkg -s libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 chromium gcc \
+            libc6-dev >/dev/null 2>&1; then
         apt-get update -qq
         DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-            libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 chromium >/dev/null
+            libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 libxrender1 chromium gcc \
+            libc6-dev >/dev/null
     fi
 fi
 PY=${PYTHON:-python3}

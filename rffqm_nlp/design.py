@@ -14,7 +14,6 @@ options: docs/solvers.md.
 
 from __future__ import annotations
 
-import re
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -29,8 +28,8 @@ from .collisions import collisions
 from .curvature import curvature_maps
 from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
                      SolverFailed, one_line, raise_for_ipopt)
-from .files import (Key, check_table, check_value, describe_value, key_name, read_toml,
-                    unknown_key)
+from .files import Key, check_table, check_value, describe_value, read_toml, unknown_key
+from .ipopt_options import INT_MAX, NO_OPTION_FILE, check_ipopt_options
 from .pattern import Pattern
 from .results import DesignResult, Fit, SolveStats
 
@@ -45,9 +44,11 @@ GROUPS = ("angles", "lengths", "omega")
 CORRESPONDENCES = ("lattice", "free")
 #: The tables of a design file.
 TABLES = ("target", "design", "solve")
-#: IPOPT options that a SolveOptions field (or solve's ``verbose``) sets, and that field.
-IPOPT_FIELDS = {"max_iter": "max_iter", "tol": "tol", "max_wall_time": "time_limit",
-                "hessian_approximation": "hessian", "print_level": "solve(verbose=...)"}
+#: IPOPT options that a SolveOptions field (or solve's ``verbose``) sets, and that setting.
+IPOPT_FIELDS = {"max_iter": "SolveOptions.max_iter", "tol": "SolveOptions.tol",
+                "max_wall_time": "SolveOptions.time_limit",
+                "hessian_approximation": "SolveOptions.hessian",
+                "print_level": "solve(verbose=...)"}
 #: Largest sequential pattern (panels) whose NLP is expanded to SX; see SolveOptions.expand.
 SX_MAX_PANELS = 144
 #: IPOPT's barrier from a cold start. The loss is small against the many log-barrier terms,
@@ -67,6 +68,11 @@ BOUNDARY_KNOTS = 32
 #: IPOPT statuses after which the exact Hessian does not take over from Gauss-Newton (nor
 #: does it after stop_rms is reached).
 HANDOVER_STOP_STATUSES = ("Solve_Succeeded", "Maximum_WallTime_Exceeded")
+
+#: Most starts of a multistart solve and most stages of a continuation: each is a whole
+#: solve (a study of many designs is a sweep, docs/sweeps.md).
+MAX_STARTS = 1000
+MAX_STAGES = 100
 
 #: What each key of a design file's [design] table (and each DesignProblem field but the
 #: target) allows; checked by :func:`rffqm_nlp.files.check_table`.
@@ -91,16 +97,16 @@ SOLVE_KEYS = {
     "transcription": Key("choice", choices=TRANSCRIPTIONS),
     "hessian": Key("choice", choices=HESSIANS),
     "damping": Key("number", low=0.0),
-    "continuation": Key("list", least=1, item=Key("number", low=0.0, low_open=True)),
-    "max_iter": Key("whole", low=1),
+    "continuation": Key("list", least=1, most=MAX_STAGES,
+                        item=Key("number", low=0.0, low_open=True)),
+    "max_iter": Key("whole", low=1, high=INT_MAX),
     "tol": Key("number", low=0.0, low_open=True),
     "time_limit": Key("number", low=0.0, low_open=True, optional=True),
     "stop_rms": Key("number", low=0.0, low_open=True, optional=True),
     "barrier_init": Key("number", low=0.0, low_open=True, optional=True),
-    "ipopt_options": Key("table", item=Key(
-        "scalar", hint="(IPOPT's yes/no options take 'yes' or 'no')")),
-    "multistart": Key("whole", low=1),
-    "seed": Key("whole", low=0),
+    "ipopt_options": Key("table", hint="of IPOPT options by name"),
+    "multistart": Key("whole", low=1, high=MAX_STARTS),
+    "seed": Key("whole", low=0, high=2**63 - 1),
     "boundary_knots": Key("whole", low=0, hint="(0: the whole design from the start)"),
 }
 #: The tables of a design file as :func:`rffqm_nlp.files.check_table` checks them.
@@ -159,10 +165,14 @@ class SolveOptions:
       re-marched (see :class:`_IterationLog`);
     * ``barrier_init``: IPOPT's initial barrier parameter with small bound pushes (None:
       :data:`COLD_BARRIER` from a cold start, 1e-6 from a warm start);
-    * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01},
-      or "output_file" with "file_print_level"), applied last; checked against IPOPT when
-      the options are made. Options that a field above sets (:data:`IPOPT_FIELDS`) are
-      refused;
+    * ``ipopt_options``: further IPOPT options by name (e.g. {"bound_mult_init_val": 0.01}),
+      applied last; checked against IPOPT's table of options
+      (:func:`rffqm_nlp.ipopt_options.check_ipopt_options`; nothing is built). Options that
+      a field above sets (:data:`IPOPT_FIELDS`) are refused, and so, unless ``trust``, are
+      the options that name a file or a library ("output_file", "hsllib", ...) and the
+      linear solvers loaded from a library at run time ("ma27", ...);
+    * ``trust``: allow those options (the caller's word, as ``--trust``; never read from a
+      [solve] table, and not saved with the options);
     * ``multistart``: solve from this many starting Miuras and keep the best fit
       (:func:`solve_multistart`); ``seed``: the seed of their perturbations;
     * ``boundary_knots``: Levenberg-Marquardt steps first in a coarse basis of the boundary
@@ -187,10 +197,12 @@ class SolveOptions:
     multistart: int = 1
     seed: int = 0
     boundary_knots: int = BOUNDARY_KNOTS
+    trust: bool = False
 
     def __post_init__(self) -> None:
-        values = check_table({f.name: getattr(self, f.name) for f in fields(self)},
-                             SOLVE_KEYS, "[solve]")
+        values = check_table({f.name: getattr(self, f.name) for f in fields(self)
+                              if f.name != "trust"}, SOLVE_KEYS, "[solve]")
+        object.__setattr__(self, "trust", check_value(self.trust, Key("bool"), "trust"))
         for name, value in values.items():
             object.__setattr__(self, name, value)
         if self.solver == LM and self.transcription != "simultaneous":
@@ -202,7 +214,8 @@ class SolveOptions:
         if self.solver == LM and not self.damping > 0:
             raise InputError("[solve] damping must be > 0 with solver 'levenberg-marquardt' "
                              f"(its first damping), got {self.damping:g}")
-        object.__setattr__(self, "ipopt_options", _ipopt_options(self.ipopt_options))
+        object.__setattr__(self, "ipopt_options", check_ipopt_options(
+            self.ipopt_options, IPOPT_FIELDS, self.trust))
 
     def ipopt_phases(self, done: int) -> list[tuple[str, int]]:
         """(Hessian, iteration limit) of each IPOPT run of one solve stage, ``done``
@@ -230,15 +243,17 @@ class SolveOptions:
         return self.transcription == "sequential" and panels[0] * panels[1] <= SX_MAX_PANELS
 
     def to_config(self) -> dict[str, Any]:
-        """The options as a TOML-ready [solve] table (unset optional values left out)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        """The options as a TOML-ready [solve] table (unset optional values and ``trust``
+        left out)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "trust"}
         out.update(continuation=list(self.continuation), ipopt_options=dict(self.ipopt_options))
         return {k: v for k, v in out.items() if v is not None}
 
     @classmethod
-    def from_config(cls, table: dict[str, Any]) -> "SolveOptions":
-        """Options from a [solve] table; an unknown key is refused with the closest known."""
-        return cls(**check_table(table, SOLVE_KEYS, "[solve]"))
+    def from_config(cls, table: dict[str, Any], trust: bool = False) -> "SolveOptions":
+        """Options from a [solve] table; an unknown key is refused with the closest known.
+        ``trust``: the table's ipopt_options may name files and libraries."""
+        return cls(**check_table(table, SOLVE_KEYS, "[solve]"), trust=trust)
 
 
 @dataclass(frozen=True)
@@ -416,7 +431,7 @@ class DesignProblem:
         if corr is None or design.get("correspondence") != "free":
             return None
         controls = transcription.controls_of(
-            initial.x, SolveOptions.from_config(solve).transcription, corr.size)
+            initial.x, _transcription_of(solve), corr.size)
         lower, upper = corr.bounds()
         if controls.size != corr.size or np.any(controls < lower) or np.any(controls > upper):
             return None
@@ -436,7 +451,7 @@ class DesignProblem:
         if corr is None:
             return None
         controls = transcription.controls_of(
-            result.x, SolveOptions.from_config(result.problem["solve"]).transcription, corr.size)
+            result.x, _transcription_of(result.problem["solve"]), corr.size)
         return corr.grid(*corr.views(controls))
 
     # ------------------------------------------------------------------ solve
@@ -657,7 +672,7 @@ class DesignProblem:
             "ipopt.max_iter": max_iter, "ipopt.tol": options.tol,
             "ipopt.constr_viol_tol": 1e-9, "ipopt.print_level": 5 if record.verbose else 0,
             "print_time": record.verbose, "ipopt.sb": "yes",
-            "expand": options.expand(self.panels)}
+            "expand": options.expand(self.panels), **NO_OPTION_FILE}
         if options.time_limit is not None:
             opts["ipopt.max_wall_time"] = max(options.time_limit - elapsed, 1e-3)
         if warm or options.barrier_init is not None:
@@ -802,7 +817,7 @@ def from_config(config: dict[str, Any], root: str | Path | None = None,
         if key in SOLVE_KEYS:
             raise InputError(f"[design] {key} is a solve option: move it to the [solve] table")
     design = check_table(design, DESIGN_KEYS, "[design]")
-    options = SolveOptions.from_config(tables.get("solve", {}))
+    options = SolveOptions.from_config(tables.get("solve", {}), trust)
     target = surfaces.from_config(tables["target"], root=root, trust=trust)
     return DesignProblem(target=target, **design), options
 
@@ -1018,6 +1033,13 @@ def _require_finite(values: dict[str, Any], stats: SolveStats, x: np.ndarray) ->
                            status="non_finite", stats=stats, last_iterate=x)
 
 
+def _transcription_of(solve: dict[str, Any]) -> str:
+    """The transcription a [solve] table names (its default where it names none), read
+    without the rest of the table: a result's design vector is laid out by it."""
+    return check_value(solve.get("transcription", SolveOptions.transcription),
+                       SOLVE_KEYS["transcription"], "[solve] transcription")
+
+
 def _with_overrides(options: SolveOptions | None, overrides: dict[str, Any]) -> SolveOptions:
     """``options`` (default SolveOptions()) with SolveOptions fields given by name."""
     if options is not None and not isinstance(options, SolveOptions):
@@ -1026,36 +1048,6 @@ def _with_overrides(options: SolveOptions | None, overrides: dict[str, Any]) -> 
         if key not in SOLVE_KEYS:
             raise InputError(f"solve(): {unknown_key(key, SOLVE_KEYS, '[solve]')}")
     return replace(options or SolveOptions(), **overrides)
-
-
-# ---------------------------------------------------------------------- validation
-def _ipopt_options(options: dict[str, Any]) -> dict[str, str | int | float]:
-    """``options`` (checked by :data:`SOLVE_KEYS`) with any "ipopt." prefix dropped, checked
-    by building a small IPOPT solver with them (CasADi rejects unknown names, IPOPT values of
-    the wrong type or out of range)."""
-    out: dict[str, str | int | float] = {}
-    for key, value in options.items():
-        name = key.removeprefix("ipopt.")
-        if not re.fullmatch(r"[a-z0-9_]{1,40}", name):
-            raise InputError(f"{key_name('[solve] ipopt_options', key)} is not an IPOPT option "
-                             "name (lower-case letters, digits and _)")
-        if name in IPOPT_FIELDS:
-            raise InputError(f"[solve] ipopt_options: set {name} through SolveOptions' "
-                             f"{IPOPT_FIELDS[name]}, not ipopt_options")
-        out[name] = value
-    if out:
-        x = ca.MX.sym("x")
-        try:
-            ca.nlpsol("ipopt_options", "ipopt", {"x": x, "f": x * x},
-                      {**{f"ipopt.{k}": v for k, v in out.items()}, "ipopt.sb": "yes",
-                       "ipopt.print_level": 0, "print_time": False})
-        except RuntimeError as exc:
-            reason = re.split(r"\.[ch]pp:\d+: ", one_line(exc))[-1]  # CasADi's last word
-            if reason.startswith("Invalid options"):
-                reason += " It printed which and why above."
-            raise InputError(f"IPOPT rejects [solve] ipopt_options ({', '.join(out)}): "
-                             f"{reason}") from None
-    return out
 
 
 def _violation_report(nlp: transcription.NLP, sol) -> str:

@@ -413,7 +413,7 @@ class Key:
     * "choice": one of the strings ``choices``;
     * "bool": true or false; "string": a string; "scalar": a finite number or a string;
     * "list": a list (or tuple) of values each checked by ``item``, with exactly ``length``
-      or at least ``least`` of them, as a tuple;
+      or at least ``least`` and at most ``most`` of them, as a tuple;
     * "table": a table checked by ``spec`` (:func:`check_table`), or, without ``spec``, whose
       every value ``item`` checks, as a dict.
 
@@ -432,6 +432,7 @@ class Key:
     item: "Key | None" = None
     length: int | None = None
     least: int = 0
+    most: int | None = None
     spec: "Mapping[str, Key] | None" = None
     optional: bool = False
     required: bool = False
@@ -446,6 +447,7 @@ class Key:
             text = "an even whole number" if self.even else "a whole number"
         if self.kind == "list":
             count = (_items(self.length) if self.length is not None
+                     else f"{self.least} to {_items(self.most)}" if self.most is not None
                      else f"at least {_items(self.least)}" if self.least else "items")
             text = f"a list of {count}" + (f", each {self.item.allowed()}" if self.item else "")
         if self.kind == "table":
@@ -608,7 +610,8 @@ def _check_list(value: Any, key: Key, name: str) -> Any:
         value = value.tolist()
     if not isinstance(value, (list, tuple)):
         return _REFUSED
-    if (key.length is not None and len(value) != key.length) or len(value) < key.least:
+    if ((key.length is not None and len(value) != key.length) or len(value) < key.least
+            or (key.most is not None and len(value) > key.most)):
         return _REFUSED
     if key.item is None:
         return tuple(value)

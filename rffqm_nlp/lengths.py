@@ -49,6 +49,7 @@ from . import memory
 from .boundary import BoundaryData
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
 from .files import Key, check_value
+from .ipopt_options import NO_OPTION_FILE
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
 
@@ -267,7 +268,7 @@ def _solution(bd: BoundaryData, A: np.ndarray, ell: np.ndarray, value: float, fl
 def _ipopt_options(tol: float, max_iter: int, verbose: bool) -> dict[str, Any]:
     return {"ipopt.tol": float(tol), "ipopt.constr_viol_tol": 1e-10,
             "ipopt.max_iter": max_iter, "ipopt.print_level": 5 if verbose else 0,
-            "print_time": verbose, "ipopt.sb": "yes"}
+            "print_time": verbose, "ipopt.sb": "yes", **NO_OPTION_FILE}
 
 
 def _solve(name: str, x, f, g, opts: dict, x0, lbx, ubx, lbg,
