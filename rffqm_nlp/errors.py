@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import re
+import unicodedata
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -14,20 +14,21 @@ if TYPE_CHECKING:
 MAX_WORD = 120
 #: Longest message: a longer one is cut and says how long it was.
 MAX_MESSAGE = 1000
-#: Characters a message never shows as they are (they could move the cursor, recolour or
-#: clear a terminal, or reorder the text): C0 and C1 controls, DEL, and Unicode's
-#: bidirectional and zero-width format characters.
-_UNSAFE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e"
-                     "\u2060-\u2069\ufeff]")
+#: Unicode categories a message never shows as they are: controls (C0, C1, DEL: they can
+#: move the cursor, recolour or clear a terminal), format characters (bidirectional and
+#: zero-width marks, which reorder or hide text) and lone surrogates (from undecodable
+#: file names, which a terminal cannot print).
+_UNSAFE = ("Cc", "Cf", "Cs")
 
 
 def safe_text(text: str) -> str:
     """``text`` fit for a user's terminal or a log line: on one line (runs of whitespace as
-    one space), unsafe characters (:data:`_UNSAFE`) escaped as ``\\xNN``/``\\uNNNN``,
+    one space), unsafe characters (:data:`_UNSAFE`) escaped as Python writes them (``\\x1b``),
     every word longer than :data:`MAX_WORD` cut in its middle, the whole cut at
     :data:`MAX_MESSAGE` characters. The one sanitizer of everything rffqm_nlp says: every
     :class:`RffqmError` message goes through it."""
-    text = _UNSAFE.sub(_escape, str(text))
+    text = "".join(_escape(c) if unicodedata.category(c) in _UNSAFE and not c.isspace()
+                   else c for c in str(text))
     words = [_cut_word(word) for word in text.split()]
     text = " ".join(words)
     if len(text) > MAX_MESSAGE:
@@ -35,9 +36,10 @@ def safe_text(text: str) -> str:
     return text
 
 
-def _escape(match: re.Match) -> str:
-    code = ord(match[0])
-    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+def _escape(char: str) -> str:
+    code = ord(char)
+    return (f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000
+            else f"\\U{code:08x}")
 
 
 def _cut_word(word: str) -> str:
