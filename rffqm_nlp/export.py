@@ -2,13 +2,16 @@
 one registry :data:`EXPORTERS` (with FOLD) that ``rffqm export`` and ``rffqm design`` use.
 
 Edges, faces and vertices are numbered as in the FOLD file (:mod:`rffqm_nlp.foldfile`).
-Every file is written atomically (:func:`rffqm_nlp.files.atomic_path`).
+Every file is written atomically (:func:`rffqm_nlp.files.atomic_path`), and only from finite
+coordinates that the file's number type holds (64-bit floats; 32-bit floats in PLY and
+GLB): anything else is refused in one :class:`InputError` line and nothing is written.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -17,7 +20,8 @@ import numpy as np
 
 from .errors import InputError
 from .files import atomic_path
-from .foldfile import CREATOR, edge_assignments, edges_vertices, faces_vertices, write_fold
+from .foldfile import (CREATOR, FLOAT32_MAX, FLOAT64_MAX, check_coordinates, finite_pattern,
+                       edge_assignments, edges_vertices, faces_vertices, write_fold)
 from .marching import fold
 from .pattern import Pattern, check_omega
 
@@ -33,12 +37,28 @@ DXF_LAYERS: dict[str, tuple[str, int]] = {"M": ("MOUNTAIN", 1), "V": ("VALLEY", 
                                           "B": ("BOUNDARY", 7)}
 #: Mesh formats of :func:`write_mesh`, by file suffix.
 MESH_FORMATS = {".obj": "obj", ".ply": "ply", ".glb": "glb"}
+#: The number type of each mesh format's coordinates: (largest value, name).
+MESH_NUMBERS = {"obj": (FLOAT64_MAX, "a 64-bit float"),
+                "ply": (FLOAT32_MAX, "the 32-bit float of a PLY file"),
+                "glb": (FLOAT32_MAX, "the 32-bit float of a GLB file")}
+
+
+@contextlib.contextmanager
+def _refusing(path: str | os.PathLike) -> Iterator[None]:
+    """An :class:`InputError` raised inside says "cannot write ``path``: ..." (once)."""
+    try:
+        yield
+    except InputError as exc:
+        if str(exc).startswith("cannot write "):
+            raise
+        raise InputError(f"cannot write {path}: {exc}") from None
 
 
 # --------------------------------------------------------------------------- 2-D drawings
 def crease_segments(pat: Pattern, omega: float) -> list[tuple[np.ndarray, np.ndarray, str]]:
-    """Every edge of the flat pattern as (p0, p1, kind), p 2-D, kind in {"M", "V", "B"}."""
-    xy = pat.X[..., :2].reshape(-1, 2)
+    """Every edge of the flat pattern as (p0, p1, kind), p 2-D, kind in {"M", "V", "B"};
+    :class:`InputError` for a pattern that is not finite."""
+    xy = finite_pattern(pat).X[..., :2].reshape(-1, 2)
     kinds = edge_assignments(pat, omega)
     return [(xy[a].copy(), xy[b].copy(), str(k))
             for (a, b), k in zip(edges_vertices(pat.N, pat.M), kinds)]
@@ -58,15 +78,22 @@ def draw_creases(ax: Axes, pat: Pattern, omega: float, linewidth: float = 1.0) -
 
 
 def _crease_figure(pat: Pattern, omega: float, width_in: float = 8.0):
-    """A bare figure (no background, no axes) of the pattern, sized to its aspect ratio."""
+    """A bare figure (no background, no axes) of the pattern, sized to its aspect ratio;
+    :class:`InputError` when its extent is not a finite positive size."""
     from matplotlib.figure import Figure
 
-    xy = pat.X[..., :2].reshape(-1, 2)
+    xy = finite_pattern(pat).X[..., :2].reshape(-1, 2)
     lo, hi = xy.min(axis=0), xy.max(axis=0)
-    span = hi - lo
-    pad = 0.02 * span.max()
-    size = span + 2 * pad
-    fig = Figure(figsize=(width_in, width_in * size[1] / size[0]))
+    with np.errstate(all="ignore"):
+        span = hi - lo
+        pad = 0.02 * span.max()
+        size = span + 2 * pad
+        height = width_in * size[1] / size[0]
+    check_coordinates([*(lo - pad), *(hi + pad), *size, height],
+                      "the flat pattern's drawing bounds and size")
+    if not (np.all(size > 0) and height > 0):
+        raise InputError("the flat pattern has no extent to draw")
+    fig = Figure(figsize=(width_in, height))
     fig.patch.set_visible(False)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
     ax.patch.set_visible(False)
@@ -81,7 +108,8 @@ def write_svg(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
     valley, #000000 boundary (Origami Simulator's import colours). Deterministic output."""
     import matplotlib
 
-    fig = _crease_figure(pat, omega)
+    with _refusing(path):
+        fig = _crease_figure(pat, omega)
     with matplotlib.rc_context({"svg.hashsalt": CREATOR, "svg.fonttype": "none"}), \
             atomic_path(path) as tmp:
         fig.savefig(tmp, format="svg", metadata={"Date": None})
@@ -90,7 +118,8 @@ def write_svg(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
 
 def write_pdf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
     """Crease pattern as PDF, styled as :func:`write_svg`."""
-    fig = _crease_figure(pat, omega)
+    with _refusing(path):
+        fig = _crease_figure(pat, omega)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="pdf", metadata={"CreationDate": None})
     return Path(path)
@@ -101,11 +130,13 @@ def write_dxf(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
     VALLEY (blue) or BOUNDARY (white/black), for laser cutters and CAD."""
     import ezdxf
 
+    with _refusing(path):
+        segments = crease_segments(pat, omega)
     doc = ezdxf.new("R2010", units=0)
     for layer, color in DXF_LAYERS.values():
         doc.layers.add(layer, color=color)
     msp = doc.modelspace()
-    for p0, p1, kind in crease_segments(pat, omega):
+    for p0, p1, kind in segments:
         msp.add_line(tuple(p0), tuple(p1), dxfattribs={"layer": DXF_LAYERS[kind][0]})
     with atomic_path(path) as tmp:
         doc.saveas(tmp)
@@ -122,21 +153,29 @@ def triangles(N: int, M: int) -> np.ndarray:
 
 def folded_mesh(pat: Pattern, omega: float) -> trimesh.Trimesh:
     """The folded state at ``omega`` as a ``trimesh.Trimesh`` ((N+1)(M+1) vertices, 2NM
-    triangles, vertex order of the FOLD file)."""
+    triangles, vertex order of the FOLD file); :class:`InputError` for a pattern or folded
+    coordinates that are not finite."""
     import trimesh
 
-    Y = fold(pat, float(check_omega(omega)))
+    om = float(check_omega(omega))
+    Y = check_coordinates(fold(finite_pattern(pat), om),
+                          f"the folded coordinates at omega {om:g}")
     return trimesh.Trimesh(vertices=Y.reshape(-1, 3), faces=triangles(pat.N, pat.M),
                            process=False)
 
 
 def write_mesh(path: str | os.PathLike, pat: Pattern, omega: float) -> Path:
-    """Write the folded mesh as .obj, .ply (binary) or .glb (binary glTF) by the suffix."""
+    """Write the folded mesh as .obj, .ply (binary) or .glb (binary glTF) by the suffix;
+    coordinates that the format's numbers cannot hold (:data:`MESH_NUMBERS`: 32-bit floats
+    in PLY and GLB) are refused in one :class:`InputError` line, and nothing is written."""
     suffix = Path(path).suffix.lower()
     if suffix not in MESH_FORMATS:
         raise InputError(f"mesh format {suffix!r} not supported; use one of "
                          f"{sorted(MESH_FORMATS)}")
-    mesh = folded_mesh(pat, omega)
+    limit, number = MESH_NUMBERS[MESH_FORMATS[suffix]]
+    with _refusing(path):
+        mesh = folded_mesh(pat, omega)
+        check_coordinates(mesh.vertices, "the folded coordinates", limit=limit, number=number)
     with atomic_path(path) as tmp:
         mesh.export(tmp, file_type=MESH_FORMATS[suffix])
     return Path(path)

@@ -19,16 +19,51 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .errors import InputError, one_line
+from .errors import InputError
 from .files import describe_value, jsonable, read_json, write_json
 from .marching import fold, fold_angles
 from .pattern import Pattern, check_omega, motion_omegas
+from .results import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
 
 CREATOR = "rffqm-nlp"
 PREFIX = "rffqm:"
 ASSIGNMENTS = frozenset("BMVFU")
 _RESERVED = ("omega", "pattern", "version")
 _ANGLE_TOL = 1e-9
+#: Largest size of a coordinate in a file of 64-bit floats (FOLD, SVG, PDF, DXF, OBJ) and
+#: in one of 32-bit floats (PLY, GLB).
+FLOAT64_MAX = float(np.finfo(np.float64).max)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+# --------------------------------------------------------------------------- finite output
+def finite_pattern(pat: Any) -> Pattern:
+    """``pat`` when it is a :class:`Pattern` whose every array is finite, else
+    :class:`InputError` (one line): nothing is drawn or written from NaN or infinity."""
+    if not isinstance(pat, Pattern):
+        raise InputError(f"expected a Pattern, got {type(pat).__name__}")
+    for name in PATTERN_KEYS:
+        if not np.all(np.isfinite(getattr(pat, name))):
+            raise InputError(f"the pattern's {name} holds NaN or inf; only a finite pattern "
+                             "is drawn or written")
+    return pat
+
+
+def check_coordinates(values: Any, what: str, limit: float = FLOAT64_MAX,
+                      number: str = "a 64-bit float") -> np.ndarray:
+    """``values`` as a float array when every value is finite and at most ``limit`` in size
+    (the largest ``number``, the file's number type, holds: :data:`FLOAT64_MAX`,
+    :data:`FLOAT32_MAX`), else :class:`InputError` (one line) naming ``what``."""
+    with np.errstate(all="ignore"):
+        arr = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{what} hold NaN or inf (an overflow, or a pattern that is not "
+                         "finite); scale the pattern's side lengths down")
+    largest = float(np.abs(arr).max(initial=0.0))
+    if largest > limit:
+        raise InputError(f"{what} reach {largest:.3g}, more than {number} holds "
+                         f"({limit:.3g}); scale the pattern's side lengths down")
+    return arr
 
 
 # --------------------------------------------------------------------------- numbering
@@ -61,9 +96,11 @@ def _boundary_mask(N: int, M: int) -> np.ndarray:
 
 
 def edge_fold_angles(pat: Pattern, omega: float) -> np.ndarray:
-    """Fold angle (radians, gamma > 0 valley, 0 on boundary edges) of every edge at ``omega``."""
-    gh, gv = fold_angles(pat, omega)
-    return np.concatenate([gh.ravel(), gv.ravel()])
+    """Fold angle (radians, gamma > 0 valley, 0 on boundary edges) of every edge at ``omega``;
+    :class:`InputError` for a pattern or angles that are not finite."""
+    gh, gv = fold_angles(finite_pattern(pat), omega)
+    return check_coordinates(np.concatenate([gh.ravel(), gv.ravel()]),
+                             f"the fold angles at omega {float(omega):g}")
 
 
 def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
@@ -103,6 +140,7 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
     """
     if not isinstance(pat, Pattern):
         raise InputError(f"fold_dict expects a Pattern, got {type(pat).__name__}")
+    finite_pattern(pat)
     om = float(check_omega(omega))
     d: dict[str, Any] = {
         "file_spec": 1.2,
@@ -119,7 +157,7 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
     }
     omegas = frame_omegas(om, frames)
     if omegas.size:
-        Y = fold(pat, omegas)
+        Y = check_coordinates(fold(pat, omegas), "the folded coordinates of the frames")
         d["file_frames"] = [{
             "frame_classes": ["foldedForm"],
             "frame_attributes": ["3D"],
@@ -137,23 +175,38 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
         if key in _RESERVED:
             raise InputError(f"metadata key {key!r} is reserved; choose another name")
         d[PREFIX + str(key)] = jsonable(value)
+    check_numbers({k: v for k, v in d.items() if k.startswith(PREFIX)}, "the FOLD metadata")
     return d
 
 
 def write_fold(path: str | os.PathLike, pat: Pattern, omega: float,
                frames: int | np.ndarray | None = None,
                metadata: Mapping[str, Any] | None = None) -> Path:
-    """Write :func:`fold_dict` as a ``.fold`` JSON file; returns the path."""
-    return write_json(path, fold_dict(pat, omega, frames, metadata), indent=1)
+    """Write :func:`fold_dict` as a ``.fold`` JSON file (atomically); returns the path.
+    A pattern, coordinates, fold angles or metadata that are not finite (or an integer too
+    large for a float) are refused in one :class:`InputError` line, and nothing is
+    written."""
+    try:
+        d = fold_dict(pat, omega, frames, metadata)
+    except InputError as exc:
+        raise InputError(f"cannot write {path}: {exc}") from None
+    return write_json(path, d, indent=1)
 
 
 def _array(d: Mapping, key: str, problems: list[str], dtype=float) -> np.ndarray | None:
-    """``d[key]`` as a rectangular array, or None (with a problem) when it is not one."""
+    """``d[key]`` as a rectangular array of numbers (of whole numbers for ``dtype`` int), or
+    None (with a problem) when it is not one: strings, booleans and integers too large for
+    the type are never converted."""
+    whole = dtype is int
     try:
-        return np.array(d[key], dtype=dtype)
-    except (TypeError, ValueError):
-        problems.append(f"{key} is not a rectangular array of numbers")
+        arr = np.array(d[key])
+    except (TypeError, ValueError, OverflowError):
+        arr = None
+    if arr is None or arr.dtype.kind not in ("iu" if whole else "iuf"):
+        problems.append(f"{key} is not a rectangular array of "
+                        f"{'whole numbers' if whole else 'numbers'}")
         return None
+    return arr.astype(dtype)
 
 
 def _signed_areas(xy: np.ndarray, faces: list) -> np.ndarray:
@@ -191,10 +244,11 @@ def _check_edge_data(d: Mapping, ne: int, inherited: np.ndarray | None, where: s
         asg = None
         if not isinstance(own, list) or len(own) != ne:
             problems.append(f"{where}edges_assignment must list one assignment per edge ({ne})")
-        elif bad := sorted({repr(a) for a in own
-                            if not (isinstance(a, str) and a in ASSIGNMENTS)}):
-            problems.append(f"{where}edges_assignment has values {', '.join(bad)} outside "
-                            f"{sorted(ASSIGNMENTS)}")
+        elif bad := [k for k, a in enumerate(own)
+                     if not (isinstance(a, str) and a in ASSIGNMENTS)]:
+            problems.append(f"{where}edges_assignment has values outside "
+                            f"{sorted(ASSIGNMENTS)}: edge {bad[0]} holds "
+                            f"{describe_value(own[bad[0]])} ({len(bad)} edges)")
         else:
             asg = np.array(own)
     if "edges_foldAngle" in d:
@@ -202,6 +256,9 @@ def _check_edge_data(d: Mapping, ne: int, inherited: np.ndarray | None, where: s
         if ang is not None and ang.shape != (ne,):
             problems.append(f"{where}edges_foldAngle must list one angle per edge ({ne})")
         elif ang is not None:
+            if not np.all(np.isfinite(ang)):
+                problems.append(f"{where}edges_foldAngle has non-finite angles")
+                return asg
             if not np.all(np.abs(ang) <= 180):
                 problems.append(f"{where}edges_foldAngle has angles outside [-180, 180] degrees")
             if asg is not None:
@@ -251,13 +308,19 @@ def _check_frames(d: Mapping, nv: int, ne: int, asg: np.ndarray | None,
     for k, frame in enumerate(frames, start=1):
         where = f"file_frames[{k - 1}]: "
         parent = frame.get("frame_parent", 0)
-        if not isinstance(parent, int) or not 0 <= parent <= len(frames) or parent == k:
-            problems.append(f"{where}frame_parent {parent!r} is not another frame")
+        if (not isinstance(parent, int) or isinstance(parent, bool)
+                or not 0 <= parent <= len(frames) or parent == k):
+            problems.append(f"{where}frame_parent ({describe_value(parent)}) is not another "
+                            "frame")
         if "vertices_coords" in frame:
-            xyz = _array(frame, "vertices_coords", problems)
-            if xyz is not None and (xyz.ndim != 2 or xyz.shape[0] != nv):
+            xyz = _array(frame, "vertices_coords", [])
+            if xyz is None:
+                problems.append(f"{where}vertices_coords is not a rectangular array of numbers")
+            elif xyz.ndim != 2 or xyz.shape[0] != nv:
                 problems.append(f"{where}vertices_coords has shape {xyz.shape}, the key "
                                 f"frame {nv} vertices")
+            elif not np.all(np.isfinite(xyz)):
+                problems.append(f"{where}vertices_coords has non-finite coordinates")
         if ne:
             _check_edge_data(frame, ne, asg, where, problems)
 
@@ -299,12 +362,20 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
     """Read a FOLD file written by :func:`write_fold`: (pattern, omega, metadata).
 
     ``metadata`` holds the ``rffqm:`` keys of the file other than omega, pattern and
-    version, without the prefix. Raises :class:`InputError` for a file that is not valid
-    JSON (or no regular file: a folder, a FIFO, a device), not a FOLD file, or not written
-    by this package.
+    version, without the prefix. The design data are checked as a saved result's are:
+    no number anywhere NaN, infinite or too large for a float
+    (:func:`rffqm_nlp.results.check_numbers`), ``rffqm:pattern`` admissible and equal to
+    its boundary data re-marched with the NumPy model
+    (:func:`rffqm_nlp.results.checked_pattern`), ``rffqm:omega`` in [-pi, pi], and the
+    flat coordinates those of the pattern. Raises :class:`InputError` (one line, never
+    quoting the file's content) for a file that is not valid JSON (or no regular file: a
+    folder, a FIFO, a device), not a FOLD file, not written by this package, or whose
+    design data fail these checks.
     """
     path = Path(path)
     d = read_json(path, "FOLD file")
+    if isinstance(d, Mapping):
+        check_numbers(d, str(path))
     problems = validate_fold(d)
     if problems:
         raise InputError(f"{path} is not a valid FOLD file: " + "; ".join(problems))
@@ -313,15 +384,21 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
                          f"(file_creator {describe_value(d.get('file_creator'))}, no "
                          "'rffqm:pattern'); "
                          "only files from write_fold carry the design data")
+    pat = checked_pattern(d[PREFIX + "pattern"], str(path), where=PREFIX + "pattern")
+    if PREFIX + "omega" not in d:
+        raise InputError(f"{path}: the key 'rffqm:omega' is missing")
     try:
-        pat = Pattern.from_dict(d[PREFIX + "pattern"])
-        omega = float(check_omega(d[PREFIX + "omega"]))
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise InputError(f"{path}: broken rffqm design data ({type(exc).__name__}: "
-                         f"{one_line(exc)})") from None
+        omega = check_omega(d[PREFIX + "omega"], PREFIX + "omega")
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
+    if omega.ndim:
+        raise InputError(f"{path}: rffqm:omega must be one number in [-pi, pi], got a list")
+    omega = float(omega)
     xy = np.asarray(d["vertices_coords"], dtype=float)
-    if xy.shape != ((pat.N + 1) * (pat.M + 1), 2) or not np.allclose(
-            xy, pat.X[..., :2].reshape(-1, 2), rtol=0, atol=1e-9):
+    flat = pat.X[..., :2].reshape(-1, 2)
+    scale = max(float(np.abs(flat).max(initial=0.0)), 1e-300)
+    if (xy.shape != flat.shape
+            or float(np.abs(xy - flat).max(initial=0.0)) > REMARCH_RTOL * scale):
         raise InputError(f"{path}: vertices_coords do not match 'rffqm:pattern'; the file "
                          "was edited after it was written")
     meta = {k[len(PREFIX):]: v for k, v in d.items()

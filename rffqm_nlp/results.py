@@ -3,8 +3,12 @@
 
 from __future__ import annotations
 
+import math
 import os
-from dataclasses import MISSING, asdict, dataclass, field, fields
+import re
+import sys
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -14,9 +18,9 @@ import trimesh
 from . import numpy_model, surfaces
 from .boundary import BoundaryData
 from .curvature import Curvature
-from .errors import InputError, RffqmError, one_line
-from .files import jsonable, read_json, write_json
-from .pattern import Pattern
+from .errors import InputError, MarchingError, RffqmError, safe_text
+from .files import Key, check_table, describe_value, jsonable, read_json, shown_name, write_json
+from .pattern import Pattern, check_omega
 from .shape import coarse_grain
 
 if TYPE_CHECKING:  # plotly is imported by the view, on use
@@ -32,6 +36,70 @@ V1_SOLVE_KEYS = ("continuation", "transcription", "solver", "hessian", "damping"
                  "tol", "time_limit", "stop_rms", "barrier_init", "ipopt_options")
 #: Samples per direction of a rebuilt target surface drawn as a mesh (:func:`target_mesh`).
 TARGET_MESH = 60
+#: Largest deviation of ``rotation.T @ rotation`` from the identity a stored rotation may have.
+ROTATION_TOL = 1e-9
+#: The arrays of a stored pattern (:meth:`Pattern.to_dict`).
+PATTERN_KEYS = ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")
+#: Largest integer a file may hold: the largest one a float holds (bigger ones overflow it).
+_FLOAT_MAX = int(sys.float_info.max)
+#: Keys a message names as they are (plain names such as FOLD's "rffqm:pattern"); others
+#: by their length (:func:`rffqm_nlp.files.shown_name`).
+_KEY_NAME = re.compile(r"[A-Za-z0-9_.:+-]{1,40}")
+
+#: What each key of a result's "fit" table allows (:meth:`Fit.from_dict`).
+FIT_KEYS: dict[str, Key] = {
+    **{name: Key("number", low=0.0, required=True)
+       for name in ("rms", "rms_surface", "hausdorff", "plane_rms", "min_side_over_mean")},
+    "min_sector_angle": Key("number", low=0.0, high=math.pi, required=True),
+    "collision_free": Key("bool", optional=True),
+    "first_contact_omega": Key("number", low=-math.pi, high=math.pi, optional=True),
+    **{name: Key("number", low=0.0, optional=True)
+       for name in ("rms_surface_vertices", "hausdorff_vertices", "coverage")},
+}
+#: The lists of a solve's history, one entry per iteration.
+HISTORY_KEYS: dict[str, Key] = {
+    "iter": Key("list", item=Key("whole", low=0), required=True),
+    "objective": Key("list", item=Key("number"), required=True),
+    "inf_pr": Key("list", item=Key("number", low=0.0), required=True),
+    "elapsed": Key("list", item=Key("number", low=0.0), required=True),
+}
+#: One start of a multistart's record (see :func:`rffqm_nlp.design.solve_multistart`).
+MULTISTART_RUN_KEYS: dict[str, Key] = {
+    "start": Key("whole", low=0, required=True),
+    "alpha0": Key("number", low=0.0, high=math.pi, required=True),
+    "omega0": Key("number", low=-math.pi, high=math.pi, required=True),
+    "status": Key("string", required=True),
+    "rms": Key("number", low=0.0, optional=True),
+    "iterations": Key("whole", low=0, optional=True),
+    "reason": Key("string", required=True),
+    "time": Key("number", low=0.0, required=True),
+}
+#: The record of a multistart (SolveStats.multistart).
+MULTISTART_KEYS: dict[str, Key] = {
+    "starts": Key("whole", low=1, required=True),
+    "seed": Key("whole", low=0, required=True),
+    "chosen": Key("whole", low=0, required=True),
+    "time": Key("number", low=0.0, required=True),
+    "runs": Key("list", item=Key("table", spec=MULTISTART_RUN_KEYS), required=True),
+}
+#: What each key of a result's "stats" table allows (:meth:`SolveStats.from_dict`).
+STATS_KEYS: dict[str, Key] = {
+    "status": Key("string", required=True),
+    "success": Key("bool", required=True),
+    "iterations": Key("whole", low=0, required=True),
+    "build_time": Key("number", low=0.0, required=True),
+    "solve_time": Key("number", low=0.0, required=True),
+    "objective": Key("number", required=True),
+    "solver": Key("string", required=True),
+    "transcription": Key("string", required=True),
+    "hessian": Key("string", required=True),
+    "gauss_newton_iterations": Key("whole", low=0),
+    "marched_iterations": Key("whole", low=0),
+    "start_moved": Key("number", low=0.0, high=1.0),
+    "restoration_iterations": Key("whole", low=0),
+    "history": Key("table", spec=HISTORY_KEYS),
+    "multistart": Key("table", spec=MULTISTART_KEYS, optional=True),
+}
 
 
 @dataclass(frozen=True)
@@ -78,10 +146,12 @@ class Fit:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Fit":
-        """Inverse of :meth:`to_dict`; every field without a default must be present."""
-        values = {f.name: _required(d, f.name, "fit") for f in fields(cls)
-                  if f.default is MISSING or d.get(f.name) is not None}
-        return cls(**{name: _fit_value(name, value) for name, value in values.items()})
+        """Inverse of :meth:`to_dict`, every key checked by :data:`FIT_KEYS` (a finite
+        number in its range, ``collision_free`` true or false; the fields without a default
+        must be present, those with one may be None or left out); else :class:`InputError`
+        naming the key (``fit.rms``) and what it allows."""
+        values = check_table(d, FIT_KEYS, "fit")
+        return cls(**{name: value for name, value in values.items() if value is not None})
 
 
 def _fit_value(name: str, value: Any) -> float | bool | None:
@@ -148,11 +218,28 @@ class SolveStats:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "SolveStats":
-        """Inverse of :meth:`to_dict`; fields with defaults may be missing."""
-        values = {f.name: d[f.name] for f in fields(cls) if f.name in d}
-        for f in fields(cls):
-            if f.name not in values and f.default is MISSING and f.default_factory is MISSING:
-                _required(d, f.name, "stats")
+        """Inverse of :meth:`to_dict`, every key checked by :data:`STATS_KEYS` (finite
+        numbers, whole numbers >= 0, the history's four lists of one length, the multistart
+        record); fields with defaults may be missing. Else :class:`InputError` naming the
+        key (``stats.iterations``) and what it allows."""
+        values = check_table(d, STATS_KEYS, "stats")
+        if values.get("multistart") is None:
+            values.pop("multistart", None)
+        if "history" in values:
+            history = {key: list(values["history"][key]) for key in HISTORY_KEYS}
+            lengths = {len(series) for series in history.values()}
+            if len(lengths) > 1:
+                raise InputError("stats.history must hold lists of one length (one entry per "
+                                 "iteration), got " + ", ".join(
+                                     f"{key} of {len(series)}" for key, series in history.items()))
+            values["history"] = history
+        if "multistart" in values:
+            record = dict(values["multistart"])
+            record["runs"] = [dict(run) for run in record["runs"]]
+            if record["chosen"] >= len(record["runs"]):
+                raise InputError(f"stats.multistart.chosen must be the number of one of its "
+                                 f"{len(record['runs'])} runs, got {record['chosen']}")
+            values["multistart"] = record
         return cls(**values)
 
 
@@ -230,24 +317,31 @@ class DesignResult:
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = FILENAME) -> "DesignResult":
         """Inverse of :meth:`to_dict`: checks the format and version (a version 1 result is
-        migrated, :func:`migrate_v1`), every array's shape and finiteness, and that the
-        pattern and the folded state agree with the boundary data re-marched.
-        ``source`` names the file in the errors."""
+        migrated, :func:`migrate_v1`), that no number anywhere is NaN, infinite or too
+        large for a float (:func:`check_numbers`), every array's shape, the pattern and
+        the folded state against the boundary data re-marched (:func:`checked_pattern`),
+        omega in [-pi, pi], the rotation a proper rotation (orthonormal to
+        :data:`ROTATION_TOL`, determinant +1), and the fit and statistics key by key
+        (:data:`FIT_KEYS`, :data:`STATS_KEYS`). ``source`` names the file in the errors,
+        each one :class:`InputError` line."""
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise InputError(f"{source}: not a design result written by rffqm-nlp")
         try:
+            check_numbers(d, source)
             if d.get("version") == 1:
                 d = migrate_v1(d)
             if d.get("version") != VERSION:
-                raise InputError(f"{source}: design result version {d.get('version')!r} is "
-                                 f"not supported (this rffqm-nlp reads versions 1 and "
-                                 f"{VERSION})")
+                version = d.get("version")
+                shown = (version if isinstance(version, int) and not isinstance(version, bool)
+                         and abs(version) < 10**6 else describe_value(version))
+                raise InputError(f"{source}: design result version {shown} is not supported "
+                                 f"(this rffqm-nlp reads versions 1 and {VERSION})")
             return _checked(d, source)
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
             if isinstance(exc, RffqmError):
                 raise
-            raise InputError(f"{source}: broken design result ({type(exc).__name__}: "
-                             f"{one_line(exc)}); run the design again") from None
+            raise InputError(f"{source}: broken design result ({type(exc).__name__} while "
+                             "reading it); run the design again") from None
 
     def save(self, directory: str | os.PathLike) -> Path:
         """Write ``result.json`` into ``directory`` (created if needed), atomically; a
@@ -308,41 +402,165 @@ def _checked(d: dict[str, Any], source: str) -> DesignResult:
               ("omega", "folded", "target_points", "rotation", "translation", "x")}
     for key in ("left", "bottom", "l_left", "l_bottom"):
         _finite(_required(d, "boundary", source), key, source, f"boundary.{key}")
-    bd = BoundaryData.from_dict(d["boundary"])
-    pattern_d = _required(d, "pattern", source)
-    stored = {key: _finite(pattern_d, key, source, f"pattern.{key}")
-              for key in ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")}
+    with _named(source, "boundary"):
+        bd = BoundaryData.from_dict(d["boundary"])
     N, M = bd.N, bd.M
     shapes = {"omega": (), "folded": (N + 1, M + 1, 3),
               "target_points": (N // 2 + 1, M // 2 + 1, 3), "rotation": (3, 3),
-              "translation": (3,), "pattern.alpha": (N + 1, M + 1),
-              "pattern.beta": (N + 1, M + 1), "pattern.sigma": (N + 1, M + 1),
-              "pattern.lh": (N + 1, M), "pattern.lv": (N, M + 1), "pattern.mu": (N, M),
-              "pattern.X": (N + 1, M + 1, 3)}
-    given = {**arrays, **{f"pattern.{k}": v for k, v in stored.items()}}
+              "translation": (3,)}
     for key, expected in shapes.items():
-        if given[key].shape != expected:
-            raise InputError(f"{source}: {key} has shape {given[key].shape}, expected {expected} "
-                             f"for the boundary's {N} x {M} panels")
+        if arrays[key].shape != expected:
+            raise InputError(f"{source}: {key} has shape {arrays[key].shape}, expected "
+                             f"{expected} for the boundary's {N} x {M} panels")
     if arrays["x"].ndim != 1:
         raise InputError(f"{source}: x must be a flat list of numbers, got shape "
                          f"{arrays['x'].shape}")
-    pattern = numpy_model.march(bd)
-    for key, value in stored.items():
-        _agree(value, getattr(pattern, key), source,
-               f"pattern.{key} does not match its boundary data re-marched with the NumPy model")
-    omega = float(arrays["omega"])
-    Y = numpy_model.fold(pattern, omega) @ arrays["rotation"].T + arrays["translation"]
+    pattern = checked_pattern(_required(d, "pattern", source), source, boundary=bd)
+    with _named(source):
+        omega = float(check_omega(arrays["omega"]))
+    rotation = arrays["rotation"]
+    _check_rotation(rotation, source)
+    with np.errstate(all="ignore"):         # an overflow is refused below (_agree)
+        Y = numpy_model.fold(pattern, omega) @ rotation.T + arrays["translation"]
     _agree(arrays["folded"], Y, source, "folded does not match the pattern folded at omega "
            "and moved by the stored rotation and translation")
+    with _named(source):
+        fit = Fit.from_dict(_required(d, "fit", source))
+        stats = SolveStats.from_dict(_required(d, "stats", source))
+    problem = _required(d, "problem", source)
+    if not isinstance(problem, dict):
+        raise InputError(f"{source}: problem must be a table, got {describe_value(problem)}")
     return DesignResult(
-        boundary=bd, omega=omega, pattern=Pattern(**stored), folded=arrays["folded"],
-        target_points=arrays["target_points"], rotation=arrays["rotation"],
-        translation=arrays["translation"], fit=Fit.from_dict(_required(d, "fit", source)),
-        stats=SolveStats.from_dict(_required(d, "stats", source)),
-        problem=dict(_required(d, "problem", source)), x=arrays["x"],
-        curvature=_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
+        boundary=bd, omega=omega, pattern=pattern, folded=arrays["folded"],
+        target_points=arrays["target_points"], rotation=rotation,
+        translation=arrays["translation"], fit=fit, stats=stats, problem=dict(problem),
+        x=arrays["x"], curvature=_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
         target_grid=_target_grid(d, source))
+
+
+def checked_pattern(d: Any, source: str, boundary: BoundaryData | None = None,
+                    where: str = "pattern") -> Pattern:
+    """The crease pattern stored in the table ``d`` (:meth:`Pattern.to_dict`) of the file
+    ``source``, checked as a saved result's is: every array a rectangular array of finite
+    numbers of its shape for the N x M panels (those of ``boundary``, else those of its
+    alpha), its boundary data admissible (``boundary``, else the data it carries: the
+    triples of its left column and bottom row, its left and bottom sides), and every array
+    equal, to :data:`REMARCH_RTOL` relative, to those boundary data re-marched with the
+    independent NumPy model (:func:`rffqm_nlp.numpy_model.march`). ``where`` names the
+    table in the errors ("pattern", "rffqm:pattern"); each is one :class:`InputError`
+    line. Returns the stored pattern."""
+    if not isinstance(d, Mapping):
+        raise InputError(f"{source}: {where} must be a table of the pattern's arrays, got "
+                         f"{describe_value(d)}")
+    stored = {key: _finite(d, key, source, f"{where}.{key}") for key in PATTERN_KEYS}
+    if boundary is None:
+        alpha = stored["alpha"]
+        if alpha.ndim != 2 or min(alpha.shape) < 2:
+            raise InputError(f"{source}: {where}.alpha has shape {alpha.shape}, expected "
+                             "(N+1, M+1) with N, M >= 1")
+        N, M, whose = alpha.shape[0] - 1, alpha.shape[1] - 1, f"{where}.alpha's"
+    else:
+        N, M, whose = boundary.N, boundary.M, "the boundary's"
+    shapes = {"alpha": (N + 1, M + 1), "beta": (N + 1, M + 1), "sigma": (N + 1, M + 1),
+              "lh": (N + 1, M), "lv": (N, M + 1), "mu": (N, M), "X": (N + 1, M + 1, 3)}
+    for key, expected in shapes.items():
+        if stored[key].shape != expected:
+            raise InputError(f"{source}: {where}.{key} has shape {stored[key].shape}, expected "
+                             f"{expected} for {whose} {N} x {M} panels")
+    if boundary is None:
+        tri = np.stack([stored["alpha"], stored["beta"], stored["sigma"]], axis=-1)
+        with _named(source, f"{where}'s boundary data"):
+            boundary = BoundaryData(tri[:, 0], tri[0, 1:], stored["lv"][:, 0],
+                                    stored["lh"][0, :])
+    try:
+        with np.errstate(all="ignore"):     # an overflow is refused below
+            marched = numpy_model.march(boundary)
+    except MarchingError as exc:
+        raise InputError(f"{source}: the boundary data of {where} do not march ({exc})") \
+            from None
+    except InputError as exc:               # a marched array that is not finite
+        raise InputError(f"{source}: {where} cannot be recomputed in floating point from "
+                         f"its boundary data ({exc})") from None
+    for key, value in stored.items():
+        _agree(value, getattr(marched, key), source,
+               f"{where}.{key} does not match its boundary data re-marched with the NumPy "
+               "model")
+    with _named(source, where):
+        return Pattern(**stored)
+
+
+def check_numbers(value: Any, source: str) -> None:
+    """Refuse, in one :class:`InputError` line naming the place, a number anywhere in
+    ``value`` (a JSON document: tables, lists, numbers, strings; numpy arrays too) that is
+    NaN or infinite (JSON's NaN and Infinity, or a literal such as 1e999) or an integer
+    too large for a float. ``source`` names the file."""
+    stack: list[tuple[Any, tuple]] = [(value, ())]
+    while stack:
+        item, place = stack.pop()
+        if isinstance(item, (bool, np.bool_, str)) or item is None:
+            continue
+        if isinstance(item, (float, np.floating)):
+            if not math.isfinite(item):
+                raise InputError(f"{source}: {_place(place, 'holds NaN or inf')}; every "
+                                 "number must be finite")
+        elif isinstance(item, (int, np.integer)):
+            if abs(int(item)) > _FLOAT_MAX:
+                raise InputError(f"{source}: {_place(place, 'holds ' + describe_value(item))}, "
+                                 "too large for a floating-point number")
+        elif isinstance(item, Mapping):
+            stack.extend((v, (*place, ("key", k))) for k, v in list(item.items())[::-1])
+        elif isinstance(item, (list, tuple)) or (isinstance(item, np.ndarray)
+                                                 and item.dtype.kind == "O"):
+            stack.extend((v, (*place, ("index", i)))
+                         for i, v in reversed(list(enumerate(item))))
+        elif isinstance(item, np.ndarray) and item.dtype.kind in "fc":
+            bad = np.argwhere(~np.isfinite(item))
+            if bad.size:
+                at = (*place, *(("index", int(i)) for i in bad[0]))
+                raise InputError(f"{source}: {_place(at, 'holds NaN or inf')}; every number "
+                                 "must be finite")
+
+
+def _place(place: tuple, what: str) -> str:
+    """``pattern.X holds NaN (at pattern.X[1][2][0])``: the innermost named key, ``what``,
+    and where in the key the value is."""
+    text, named = "", ""
+    for kind, key in place:
+        if kind == "key":
+            key = key if _KEY_NAME.fullmatch(str(key)) else shown_name(key)
+            text = f"{text}.{key}" if text else key
+            named = text
+        else:
+            text = f"{text}[{key}]"
+    return f"{named or 'the value'} {what}" + ("" if text == named else f" (at {text})")
+
+
+class _named:
+    """Context manager: an :class:`InputError` raised inside comes out prefixed with
+    ``source`` (and ``where``), e.g. "run/result.json: boundary: ..."."""
+
+    def __init__(self, source: str, where: str = ""):
+        self.prefix = f"{source}: {where}: " if where else f"{source}: "
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if isinstance(exc, InputError) and not str(exc).startswith(self.prefix):
+            exc.args = (safe_text(self.prefix + str(exc)), *exc.args[1:])
+        return False
+
+
+def _check_rotation(rotation: np.ndarray, source: str) -> None:
+    """Refuse a rotation that is not orthonormal (to ROTATION_TOL) or not proper (det +1)."""
+    deviation = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
+    if deviation > ROTATION_TOL:
+        raise InputError(f"{source}: rotation must be a rotation matrix (orthonormal to "
+                         f"{ROTATION_TOL:g}), but R^T R differs from the identity by "
+                         f"{deviation:.3g}")
+    if np.linalg.det(rotation) < 0:
+        raise InputError(f"{source}: rotation must be a proper rotation (determinant +1), "
+                         "got a reflection (determinant -1)")
 
 
 def _curvature(d: dict[str, Any], source: str, shape: tuple[int, int]) -> Curvature | None:
@@ -377,20 +595,30 @@ def _required(d: Any, key: str, source: str) -> Any:
 
 
 def _finite(d: Any, key: str, source: str, name: str | None = None) -> np.ndarray:
-    """d[key] as a float array: a rectangular array of finite numbers, else InputError."""
+    """d[key] as a float array: a rectangular array of finite numbers (never strings or
+    booleans converted), else InputError naming ``name`` (default ``key``)."""
     name = name or key
-    value = _required(d, key, source)
+    if not isinstance(d, dict) or key not in d:
+        raise InputError(f"{source}: the key {name!r} is missing")
+    value = d[key]
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+        raw = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raw = None
+    if raw is None or raw.dtype.kind not in "iuf":
         raise InputError(f"{source}: {name} must be a rectangular array of numbers (a cut "
                          "or ragged array?)") from None
+    arr = raw.astype(float)
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{source}: {name} holds NaN or inf; every value must be finite")
     return arr
 
 
 def _agree(stored: np.ndarray, recomputed: np.ndarray, source: str, what: str) -> None:
+    """Refuse ``stored`` unless it equals ``recomputed`` (finite) to REMARCH_RTOL relative."""
+    if not np.all(np.isfinite(recomputed)):
+        raise InputError(f"{source}: {what.split()[0]} cannot be recomputed in floating "
+                         "point (it overflows; are the side lengths too large?)")
     scale = max(float(np.abs(recomputed).max(initial=0.0)), 1e-300)
     error = float(np.abs(stored - recomputed).max(initial=0.0))
     if error > REMARCH_RTOL * scale:

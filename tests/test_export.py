@@ -114,3 +114,88 @@ def test_registry_every_format(tmp_path):
     mesh = trimesh.load(tmp_path / "folded.ply", force="mesh", process=False)
     np.testing.assert_allclose(mesh.vertices, marching.fold(pat, OMEGA).reshape(-1, 3),
                                atol=1e-6)
+
+
+# --------------------------------------------------------------------------- finite output
+def _scaled(side: float) -> rq.Pattern:
+    """A 2 x 2 Miura-ori whose sides are all ``side``."""
+    return marching.march(rq.miura_boundary(2, 2, a=side, b=side))
+
+
+def _no_inf_or_nan(path) -> None:
+    """The file holds no spelled-out NaN or infinity (and a FOLD file is strict JSON)."""
+    if path.suffix == ".fold":
+        json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"{path}: {c}"))
+    elif path.suffix in (".svg", ".dxf", ".obj"):
+        text = path.read_text().lower()
+        assert "nan" not in text.split() and "inf" not in text and "infinity" not in text
+
+
+@pytest.mark.parametrize("side, refused", [
+    (1e150, {"ply", "glb"}),                  # beyond a 32-bit float
+    (4e307, {"ply", "glb", "svg", "pdf"}),    # the drawing's bounds overflow a 64-bit float
+])
+def test_every_exporter_refuses_what_its_numbers_cannot_hold(tmp_path, side, refused):
+    pat = _scaled(side)
+    for name, exporter in export.EXPORTERS.items():
+        path = tmp_path / exporter.filename
+        path.write_text("old")
+        if name in refused:
+            with pytest.raises(InputError) as info:
+                exporter.write(path, pat, OMEGA, frames=3)
+            message = str(info.value)
+            assert "\n" not in message and message.startswith(f"cannot write {path}: "), message
+            assert ("32-bit float" in message) if name in ("ply", "glb") else \
+                ("NaN or inf" in message), message
+            assert path.read_text() == "old"
+        else:
+            exporter.write(path, pat, OMEGA, frames=3)
+            _no_inf_or_nan(path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        e.filename for e in export.EXPORTERS.values())          # no temporary file left
+
+
+def test_mesh_number_types():
+    assert export.MESH_NUMBERS["ply"][0] == export.MESH_NUMBERS["glb"][0] == float(
+        np.finfo(np.float32).max)
+    assert export.MESH_NUMBERS["obj"][0] == float(np.finfo(np.float64).max)
+    assert set(export.MESH_NUMBERS) == set(export.MESH_FORMATS.values())
+
+
+def test_a_folding_that_overflows_is_never_written(tmp_path, monkeypatch):
+    """Folded coordinates or fold angles that come out NaN or infinite (an overflow) are
+    refused by every writer of the folded state, and by the functions that return them."""
+    pat = marching.march(rq.miura_boundary(2, 2))
+
+    def overflowing(pattern, omega):
+        Y = marching.fold(pattern, omega)
+        return np.where(np.arange(Y.shape[-2])[:, None] == 1, np.inf, Y)
+
+    monkeypatch.setattr(export, "fold", overflowing)
+    monkeypatch.setattr(foldfile, "fold", overflowing)
+    with pytest.raises(InputError, match="the folded coordinates at omega 1.3 hold NaN or inf"):
+        export.folded_mesh(pat, OMEGA)
+    with pytest.raises(InputError, match="the folded coordinates of the frames hold NaN"):
+        foldfile.fold_dict(pat, OMEGA, frames=3)
+    for name in ("obj", "ply", "glb", "fold"):
+        exporter = export.EXPORTERS[name]
+        with pytest.raises(InputError, match=rf"^cannot write .*{exporter.filename}: .*NaN"):
+            exporter.write(tmp_path / exporter.filename, pat, OMEGA, frames=3)
+    monkeypatch.setattr(foldfile, "fold_angles",
+                        lambda pattern, omega: (np.full((3, 2), np.nan), np.zeros((2, 3))))
+    with pytest.raises(InputError, match="the fold angles at omega 1.3 hold NaN or inf"):
+        foldfile.edge_fold_angles(pat, OMEGA)
+    for name in ("svg", "pdf", "dxf"):
+        exporter = export.EXPORTERS[name]
+        with pytest.raises(InputError, match=rf"^cannot write .*{exporter.filename}: the fold "
+                                             "angles"):
+            exporter.write(tmp_path / exporter.filename, pat, OMEGA)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_fold_metadata_must_be_finite():
+    pat = marching.march(rq.miura_boundary(2, 2))
+    with pytest.raises(InputError, match="rffqm:rms holds NaN or inf"):
+        foldfile.fold_dict(pat, OMEGA, metadata={"rms": float("nan")})
+    with pytest.raises(InputError, match="rffqm:seed holds a whole number of 400 digits"):
+        foldfile.fold_dict(pat, OMEGA, metadata={"seed": int("9" * 400)})

@@ -104,6 +104,18 @@ def _corrupt(d: dict, how: str) -> dict:
     elif how == "frame_angle":
         k = d["file_frames"][1]["edges_assignment"].index("M")
         d["file_frames"][1]["edges_foldAngle"][k] = 10.0
+    elif how == "frame_nan":
+        d["file_frames"][1]["vertices_coords"][2][1] = float("nan")
+    elif how == "angle_nan":
+        d["edges_foldAngle"][4] = float("inf")
+    elif how == "huge_coord":
+        d["vertices_coords"][1][0] = 10**400
+    elif how == "string_coord":
+        d["vertices_coords"][1][0] = "1.5"
+    elif how == "string_index":
+        d["edges_vertices"][0][1] = "1"
+    elif how == "long_parent":
+        d["file_frames"][0]["frame_parent"] = "Q" * 5000
     return d
 
 
@@ -112,11 +124,18 @@ def _corrupt(d: dict, how: str) -> dict:
     ("clockwise", "face 2 is not counter-clockwise"), ("missing", "missing key"),
     ("assignment", "'X'"), ("angle_sign", "disagrees with assignment 'V'"),
     ("length", "one assignment per edge"), ("frame", "file_frames[1]: vertices_coords"),
-    ("frame_angle", "file_frames[1]: edges_foldAngle disagrees with assignment 'M'")])
+    ("frame_angle", "file_frames[1]: edges_foldAngle disagrees with assignment 'M'"),
+    ("frame_nan", "file_frames[1]: vertices_coords has non-finite coordinates"),
+    ("angle_nan", "edges_foldAngle has non-finite angles"),
+    ("huge_coord", "vertices_coords is not a rectangular array of numbers"),
+    ("string_coord", "vertices_coords is not a rectangular array of numbers"),
+    ("string_index", "edges_vertices is not a rectangular array of whole numbers"),
+    ("long_parent", "file_frames[0]: frame_parent (a string of 5000 characters) is not")])
 def test_validate_finds_problems(how, words):
     pat = marching.march(rq.miura_boundary(2, 3))
     problems = foldfile.validate_fold(_corrupt(foldfile.fold_dict(pat, OMEGA, frames=2), how))
     assert len(problems) == 1 and words in problems[0], problems
+    assert "QQQQ" not in problems[0]
 
 
 def test_validate_survives_garbage():
@@ -164,3 +183,26 @@ def test_reserved_metadata_and_bad_frames():
         foldfile.fold_dict(pat, OMEGA, metadata={"when": object()})
     with pytest.raises(InputError, match="frames"):
         foldfile.fold_dict(pat, OMEGA, frames=0)
+
+
+def test_read_re_marches_the_pattern_of_a_perturbed_design(tmp_path):
+    """A written pattern of the CasADi model reads back (the NumPy model's re-march agrees);
+    the same file with one interior angle moved by 1e-6 is refused."""
+    pat = make_pattern("perturbed")
+    path = foldfile.write_fold(tmp_path / "p.fold", pat, OMEGA)
+    back, omega, _ = foldfile.read_fold(path)
+    np.testing.assert_array_equal(back.alpha, pat.alpha)
+    d = json.loads(path.read_text())
+    d["rffqm:pattern"]["beta"][3][4] += 1e-6
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError, match=r"rffqm:pattern\.beta does not match its boundary "
+                                         "data re-marched"):
+        foldfile.read_fold(path)
+
+
+def test_a_fold_file_with_huge_sides_round_trips(tmp_path):
+    """Sides of 1e150: still finite doubles; written and read back whole."""
+    pat = marching.march(rq.miura_boundary(2, 2, a=1e150, b=1e150))
+    back, _, _ = foldfile.read_fold(foldfile.write_fold(tmp_path / "p.fold", pat, OMEGA,
+                                                        frames=2))
+    np.testing.assert_array_equal(back.X, pat.X)

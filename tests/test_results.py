@@ -1,6 +1,7 @@
 """Result files: typed fit and statistics, the version 2 format, validation on load."""
 
 import json
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -43,7 +44,7 @@ def test_fit_and_stats_round_trip_through_dicts(result):
     assert Fit.from_dict(result.fit.to_dict()) == result.fit
     assert SolveStats.from_dict(result.stats.to_dict()) == result.stats
     assert [f for f in result.fit.to_dict()] == list(rq.sweeps.FIT_COLUMNS)
-    with pytest.raises(rq.InputError, match="'hausdorff' is missing"):
+    with pytest.raises(rq.InputError, match="fit needs hausdorff: a finite number >= 0"):
         Fit.from_dict({k: v for k, v in result.fit.to_dict().items() if k != "hausdorff"})
 
 
@@ -160,7 +161,7 @@ def test_curvature_maps_round_trip(result, tmp_path):
     (lambda c: c.update(target_H=[[0.1]]),
      r"curvature\.target_H has shape \(1, 1\), expected \(1, 2\)"),
     (lambda c: c["design_K"][0].__setitem__(1, float("nan")), r"curvature\.design_K holds NaN"),
-    (lambda c: c.pop("surface_H"), "'surface_H' is missing"),
+    (lambda c: c.pop("surface_H"), "the key 'curvature.surface_H' is missing"),
 ])
 def test_broken_curvature_maps_are_refused(result, tmp_path, change, message):
     data = result.to_dict()
@@ -212,3 +213,116 @@ def test_target_mesh_of_a_target_that_cannot_be_rebuilt_is_refused(result):
         results.target_mesh(replace(result, problem={**result.problem, "target": code}))
     with pytest.raises(rq.InputError, match=r"no \[target\] table"):
         results.target_mesh(replace(result, problem={}))
+
+
+# --------------------------------------------------------------------------- validated whole
+def test_fit_and_stats_keys_are_their_fields():
+    from dataclasses import MISSING, fields
+
+    for cls, keys in ((Fit, results.FIT_KEYS), (SolveStats, results.STATS_KEYS)):
+        assert list(keys) == [f.name for f in fields(cls)]
+        for f in fields(cls):
+            needed = f.default is MISSING and f.default_factory is MISSING
+            assert keys[f.name].required == needed, f.name
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"rms": "nan"}, "fit.rms must be a finite number >= 0, got the string 'nan'"),
+    ({"rms": float("nan")}, "fit.rms must be a finite number >= 0, got the number nan"),
+    ({"hausdorff": float("inf")}, "fit.hausdorff must be a finite number"),
+    ({"coverage": -0.5}, "fit.coverage must be a finite number >= 0 or None"),
+    ({"min_sector_angle": 4.0}, r"fit.min_sector_angle must be a finite number in \[0, 3.14159\]"),
+    ({"first_contact_omega": True}, "fit.first_contact_omega must be a finite number"),
+    ({"rms": 10**400}, "fit.rms must be a finite number >= 0, got a whole number of 401 digits"),
+    ({"extra": 1.0}, "unknown key fit.extra"),
+])
+def test_fit_from_dict_checks_every_field(result, change, message):
+    with pytest.raises(rq.InputError, match=message):
+        Fit.from_dict({**result.fit.to_dict(), **change})
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"iterations": -1}, "stats.iterations must be a whole number >= 0, got the whole number -1"),
+    ({"iterations": 2.0}, "stats.iterations must be a whole number"),
+    ({"build_time": float("nan")}, "stats.build_time must be a finite number >= 0"),
+    ({"objective": "0.1"}, "stats.objective must be a finite number, got the string"),
+    ({"success": "true"}, "stats.success must be true or false"),
+    ({"solver": 5}, "stats.solver must be a string, got the whole number 5"),
+    ({"start_moved": 2.0}, r"stats.start_moved must be a finite number in \[0, 1\]"),
+    ({"history": {"iter": [0], "objective": [float("inf")], "inf_pr": [0.0],
+                  "elapsed": [0.0]}}, r"stats.history.objective\[0\] must be a finite number"),
+    ({"history": {"iter": [0], "objective": [1.0], "inf_pr": [0.0]}},
+     "stats.history needs elapsed"),
+    ({"multistart": {"starts": 2, "seed": 0, "chosen": 3, "time": 1.0, "runs": []}},
+     "stats.multistart.chosen must be the number of one of its 0 runs"),
+    ({"multistart": 5}, "stats.multistart must be a table of starts, seed, chosen"),
+])
+def test_stats_from_dict_checks_every_field(result, change, message):
+    with pytest.raises(rq.InputError, match=message):
+        SolveStats.from_dict({**result.stats.to_dict(), **change})
+
+
+def test_a_multistart_record_round_trips_and_is_checked(tmp_path):
+    problem = rq.DesignProblem(rq.surfaces.get("sphere_cap", radius=4.0), panels=(4, 4))
+    res = problem.solve(rq.SolveOptions(stop_rms=0.05, multistart=2))
+    record = res.stats.multistart
+    assert record is not None and len(record["runs"]) == 2
+    back = DesignResult.load(res.save(tmp_path / "run"))
+    assert back.stats == res.stats and back.stats.multistart == record
+    data = res.to_dict()
+    data["stats"]["multistart"]["runs"][0]["alpha0"] = "1.2"
+    with pytest.raises(rq.InputError, match=r"stats.multistart.runs\[0\].alpha0 must be a "
+                                            "finite number"):
+        DesignResult.load(saved(tmp_path, data))
+
+
+def test_an_aligned_fold_of_a_zero_rotation_is_refused(result, tmp_path):
+    """A zero rotation with its folded state (every vertex at the translation) once loaded,
+    and ``rffqm fold --aligned`` put every vertex at one point."""
+    data = result.to_dict()
+    data["rotation"] = np.zeros((3, 3)).tolist()
+    data["folded"] = np.broadcast_to(result.translation, result.folded.shape).tolist()
+    folder = saved(tmp_path, data)
+    with pytest.raises(rq.InputError, match="rotation must be a rotation matrix"):
+        DesignResult.load(folder)
+    res = CliRunner().invoke(app, ["fold", str(folder), "--omega", "1.0", "--aligned"])
+    assert res.exit_code == 2, res.output
+    errors = [line for line in res.output.splitlines() if line.strip()]
+    assert len(errors) == 1 and "rotation must be a rotation matrix" in errors[0], res.output
+
+
+def test_a_result_whose_re_march_overflows_is_refused(tmp_path):
+    """Side lengths near the largest float: the stored arrays are finite, the re-marched
+    flat positions overflow; nothing infinite may be compared (inf > inf is False) or
+    loaded, and no warning is printed."""
+    bd = rq.miura_boundary(2, 2, a=1e308, b=1e308)
+    unit = rq.numpy_model.march(rq.miura_boundary(2, 2))    # lengths and X scale with a, b
+    pattern = {**unit.to_dict(), "lh": (unit.lh * 1e308).tolist(),
+               "lv": (unit.lv * 1e308).tolist(), "X": np.zeros((3, 3, 3)).tolist()}
+    data = {"format": results.FORMAT, "version": results.VERSION, "omega": 1.0,
+            "boundary": bd.to_dict(), "pattern": pattern, "folded": np.zeros((3, 3, 3)).tolist(),
+            "target_points": np.zeros((2, 2, 3)).tolist(), "rotation": np.eye(3).tolist(),
+            "translation": [0.0, 0.0, 0.0], "x": []}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(rq.InputError, match="pattern(.X)? cannot be recomputed in "
+                                                "floating point"):
+            DesignResult.load(saved(tmp_path, data))
+
+
+def test_check_numbers_names_the_place_and_never_the_content():
+    results.check_numbers({"a": [1, 2.5, "text", None, True], "b": {"c": 10**300}}, "f.json")
+    with pytest.raises(rq.InputError, match=r"^f\.json: b\.c holds NaN or inf \(at b\.c\[1\]\)"):
+        results.check_numbers({"a": [1.0], "b": {"c": [0.0, float("-inf")]}}, "f.json")
+    with pytest.raises(rq.InputError, match=r"\(a name of 5000 characters\) holds a whole "
+                                            "number of 400 digits"):
+        results.check_numbers({"Q" * 5000: int("9" * 400)}, "f.json")
+    with pytest.raises(rq.InputError, match=r"x holds NaN or inf \(at x\[1\]\[0\]\)"):
+        results.check_numbers({"x": np.array([[0.0, 1.0], [np.nan, 2.0]])}, "f.json")
+    deep = current = []
+    for _ in range(5000):                     # deeper than Python's recursion limit
+        current.append([])
+        current = current[0]
+    current.append(float("nan"))
+    with pytest.raises(rq.InputError, match="the value holds NaN or inf"):
+        results.check_numbers(deep, "f.json")
