@@ -88,20 +88,41 @@ def read_json(path: str | os.PathLike, what: str = "file",
     "design result") and the path, on one line.
 
     Refused as by :func:`read_toml` (a missing path, a folder, FIFO, device or socket,
-    files over :data:`MAX_JSON_BYTES`, text that is not UTF-8), and invalid JSON (by line
-    and column).
+    files over :data:`MAX_JSON_BYTES`, text that is not UTF-8), invalid JSON (by line
+    and column) and whole numbers of more than :data:`MAX_JSON_DIGITS` digits. NaN,
+    Infinity and 1e999 are read as floats, for the reader of each kind of file to refuse
+    naming their place (:func:`rffqm_nlp.results.check_numbers`).
     """
     try:
         text = _read_text(path, what, error, MAX_JSON_BYTES, "JSON")
     except FileNotFoundError:
         raise error(f"no {what} at {path}") from None
     try:
-        return json.loads(text)
+        return json.loads(text, parse_int=_bounded_int)
+    except _TooManyDigits as exc:
+        raise error(f"{what} {path} holds a whole number of {exc.args[0]} digits, more than "
+                    f"the {MAX_JSON_DIGITS} a file of rffqm_nlp may hold") from None
     except json.JSONDecodeError as exc:
         raise error(f"{what} {path} is not valid JSON: {exc.msg} (at line {exc.lineno}, "
                     f"column {exc.colno})") from None
     except RecursionError:
         raise error(f"{what} {path} nests its arrays or objects too deeply") from None
+
+
+#: Most digits of a whole number in a JSON file, below the 4300 past which Python refuses to
+#: convert one (rffqm_nlp writes none over 20).
+MAX_JSON_DIGITS = 4000
+
+
+class _TooManyDigits(Exception):
+    """A JSON whole number of more than :data:`MAX_JSON_DIGITS` digits."""
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_JSON_DIGITS:
+        raise _TooManyDigits(digits)
+    return int(text)
 
 
 def _read_text(path: str | os.PathLike, what: str, error: type[InputError], limit: int,

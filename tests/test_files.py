@@ -207,3 +207,21 @@ def test_replace_folder_through_a_symlink(tmp_path):
         fill(stage, NEW)
     assert (tmp_path / "link").is_symlink() and snapshot(tmp_path / "link") == NEW
     assert snapshot(tmp_path / "real") == NEW and hidden(tmp_path) == []
+
+
+def test_json_whole_numbers_past_pythons_limit_are_refused_in_one_line(tmp_path):
+    """Python refuses to convert a whole number of more than 4300 digits (a ValueError that
+    is no JSONDecodeError); read_json refuses it first, without quoting it."""
+    path = tmp_path / "result.json"
+    path.write_text('{"a": -' + "9" * 5000 + "}")
+    with pytest.raises(InputError, match="a whole number of 5000 digits") as info:
+        files.read_json(path, "design result")
+    assert "9" * 50 not in str(info.value)
+
+
+def test_json_numbers_at_the_edges_are_read(tmp_path):
+    path = tmp_path / "result.json"
+    path.write_text('{"big": 1e308, "small": -5e-324, "whole": '
+                    + "9" * files.MAX_JSON_DIGITS + "}")
+    assert files.read_json(path) == {"big": 1e308, "small": -5e-324,
+                                     "whole": int("9" * files.MAX_JSON_DIGITS)}
