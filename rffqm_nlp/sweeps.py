@@ -23,6 +23,11 @@ whole grid: a list of values is drawn from uniformly, ``{low = a, high = b}`` (o
 ``log = true``) uniformly in [a, b] (whole numbers for max_iter, multistart and seed); a
 study of lists only draws K distinct grid points.
 
+A study has at most :data:`MAX_DESIGNS` designs (its grid, or its sample), counted before
+any of them is built (:attr:`Study.count`); a larger one, a range whose whole numbers a draw
+cannot hold, or a study file of any other malformed kind is refused in one
+:class:`~rffqm_nlp.errors.InputError` line that quotes nothing of the file.
+
 Every design gets a stable ``id`` (a hash of its full configuration, defaults included) and a
 readable ``name`` (its swept values). :func:`run` solves each design as one Dask task (a
 :class:`~distributed.LocalCluster` of single-threaded worker processes by default, an
@@ -32,7 +37,9 @@ the same task function :func:`solve_design`) and streams the outcomes into ``OUT
 * ``designs/<id>/row.json``: the design's table row and configuration, written last;
 * ``designs/<id>/result.json``: the :class:`~rffqm_nlp.results.DesignResult` of a solved design;
 * ``results.parquet`` and ``results.csv``: one row per finished design, rewritten
-  atomically as each design finishes.
+  atomically as each design finishes; in the CSV every text cell that a spreadsheet would
+  read as a formula is prefixed with ``'`` (:func:`csv_frame`), the Parquet file keeps the
+  values as they are.
 
 A design that is infeasible or whose solver fails is a row with its status and reason; a
 design whose worker process dies (Dask's KilledWorker) is submitted again, up to
@@ -53,6 +60,7 @@ import json
 import logging
 import math
 import os
+import re
 import shutil
 import socket
 import time
@@ -108,6 +116,31 @@ ROW_FORMAT = "rffqm-nlp sweep row"
 ROW_VERSION = 1
 #: Environment of local worker processes: one thread each for every numerical library.
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+#: Most designs a study may have: its grid (cases x the product of the lists' lengths) or
+#: its ``sample``, counted before any design is built. Every design is checked before the
+#: first solve (about 6 ms each for an 8 x 8 sphere cap: a minute at the limit) and the
+#: table is rewritten as each design finishes (0.9 s for 10,000 rows).
+MAX_DESIGNS = 10_000
+#: Most parameters a study may vary ([sweep] keys and the cases' keys together).
+MAX_PARAMETERS = 100
+#: Deepest nesting of a swept value (a domain [[a, b], [c, d]] is 2 deep).
+MAX_DEPTH = 8
+#: Largest magnitude of a bound of a range of whole numbers (max_iter, multistart, seed):
+#: every whole number up to it is a float, and a draw holds it.
+MAX_WHOLE = 2 ** 53
+#: Largest grid that ``sample = K`` draws its K indices from (NumPy's 64-bit integers); a
+#: larger grid of lists is sampled a value of each list at a time.
+MAX_INDEX = 2 ** 62
+#: A case's name: 1 to 32 ASCII letters, digits, spaces (not at either end) and _ . + - =;
+#: it is part of its designs' names, which messages and the progress show as they are.
+CASE_NAME = re.compile(r"[A-Za-z0-9_.+=-](?:[A-Za-z0-9 _.+=-]{0,30}[A-Za-z0-9_.+=-])?")
+#: First characters of a CSV text cell that a spreadsheet reads as a formula (OWASP's CSV
+#: injection list: = + - @ tab and carriage return; also line feed and the full-width
+#: = + - @ that some spreadsheets treat alike): such a cell is written with a ' before it.
+CSV_FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r", "\n", "\uff1d", "\uff0b", "\uff0d",
+                      "\uff20")
+#: Longest label of a swept value in a design's name; a longer one is named by its kind.
+MAX_LABEL = 60
 
 
 # --------------------------------------------------------------------------- the study
@@ -122,9 +155,17 @@ class Range:
 
     def __post_init__(self) -> None:
         low = check_value(self.low, Key("number"), "low")
-        check_value(self.high, Key("number", low=low, hint="(low <= high)"), "high")
+        high = check_value(self.high, Key("number", low=low, hint="(low <= high)"), "high")
         if check_value(self.log, Key("bool"), "log"):
             check_value(low, Key("number", low=0, low_open=True, hint="(a log range)"), "low")
+        elif not math.isfinite(high - low):
+            raise InputError(f"high - low must be a finite number, got {high:g} - {low:g}; "
+                             "choose a narrower range")
+
+    def whole_numbers(self) -> int:
+        """How many whole numbers the range holds (what a draw for a key of
+        :data:`INTEGER_KEYS` can give)."""
+        return max(0, math.floor(self.high) - math.ceil(self.low) + 1)
 
     def draw(self, rng: np.random.Generator, integer: bool = False) -> float | int:
         """One value drawn from this range (a whole number in it when ``integer``)."""
@@ -184,10 +225,21 @@ class Study:
     trust: bool = False
 
     def __post_init__(self) -> None:
-        unknown = set(self.base) - set(TABLES)
-        if unknown:
-            raise InputError(f"unknown base table(s) {sorted(unknown)}; a base has "
-                             f"{', '.join(TABLES)}")
+        if not isinstance(self.base, Mapping):
+            raise InputError(f"a study's base must be a table, got {describe_value(self.base)}")
+        for table, values in self.base.items():
+            if table not in TABLES:
+                raise InputError(f"unknown base table {shown_name(table)}; a base has "
+                                 f"{', '.join(TABLES)}")
+            if not isinstance(values, Mapping):
+                raise InputError(f"[{table}] must be a table, got {describe_value(values)}")
+        if not isinstance(self.parameters, Mapping):
+            raise InputError(f"[sweep] must be a table, got {describe_value(self.parameters)}")
+        if self.sample is not None:
+            check_value(self.sample, Key("whole", low=1, high=MAX_DESIGNS,
+                                         hint="(the most designs a study may have)"),
+                        "[sweep] sample")
+        check_value(self.seed, Key("whole", low=0), "[sweep] seed")
         for key, values in self.parameters.items():
             _check_key(key)
             if isinstance(values, Range):
@@ -196,25 +248,88 @@ class Study:
                 if self.sample is None:
                     raise InputError(f"[sweep] {key} is a range {{low, high}}, which only "
                                      "sample = K draws from; give a list of values for a grid")
+                if key in INTEGER_KEYS:
+                    _check_whole_range(key, values)
             elif not isinstance(values, (list, tuple)) or not values:
                 raise InputError(f"[sweep] {key} must be a non-empty list of values (or "
                                  f"{{low, high}} with sample = K), got "
                                  f"{describe_value(values)}; put a "
                                  f"fixed setting in the [{key.split('.')[0]}] table instead")
+            else:
+                for value in values:
+                    _check_depth(value, f"[sweep] {key}")
         object.__setattr__(self, "parameters", {k: v if isinstance(v, Range) else list(v)
                                                 for k, v in self.parameters.items()})
+        if not isinstance(self.cases, (list, tuple)) or not all(
+                isinstance(c, Mapping) for c in self.cases):
+            raise InputError("sweep.cases must be an array of tables: [[sweep.cases]]")
         object.__setattr__(self, "cases", tuple(dict(c) for c in self.cases))
         for i, case in enumerate(self.cases):
-            for key in case:
+            where = f"[[sweep.cases]] #{i + 1}"
+            for key, value in case.items():
                 if key == "name":
+                    if not isinstance(value, str) or not CASE_NAME.fullmatch(value):
+                        raise InputError(f"{where} name must be 1 to 32 ASCII letters, digits, "
+                                         "spaces (not at either end) or _ . + - =, got "
+                                         f"{describe_value(value)}")
                     continue
-                _check_key(key, f"[[sweep.cases]] #{i + 1}")
+                _check_key(key, where)
                 if key in self.parameters:
                     raise InputError(f"{key} is both a [sweep] parameter and set by "
-                                     f"[[sweep.cases]] #{i + 1}; keep one")
-        if self.sample is not None:
-            check_value(self.sample, Key("whole", low=1), "[sweep] sample")
-        check_value(self.seed, Key("whole", low=0), "[sweep] seed")
+                                     f"{where}; keep one")
+                _check_depth(value, f"{where} {key}")
+        if len(self.swept) > MAX_PARAMETERS:
+            raise InputError(f"[sweep]: the study varies {len(self.swept)} parameters, more "
+                             f"than the {MAX_PARAMETERS} a study may vary")
+        self._check_count()
+
+    def _check_count(self) -> None:
+        """Refuse a grid of more than :data:`MAX_DESIGNS` designs, and a sample larger than
+        the number of distinct designs there are to draw, before any design is built."""
+        lists = {k: len(v) for k, v in self.parameters.items() if not isinstance(v, Range)}
+        factors = ([f"{len(self.cases)} cases"] if self.cases else []) + [
+            f"{k} ({n})" for k, n in lists.items()]
+        if self.sample is None:
+            count = self.grid_size()
+            if count > MAX_DESIGNS:
+                raise InputError(f"[sweep]: the grid has {_count_text(count)} designs "
+                                 f"({' x '.join(factors)}), more than the limit of "
+                                 f"{MAX_DESIGNS} designs a study may have; sweep fewer "
+                                 "values, or draw some of them with sample = K")
+            return
+        distinct = self.grid_size()
+        for key, values in self.parameters.items():
+            if not isinstance(values, Range):
+                continue
+            if key not in INTEGER_KEYS:
+                return                              # real numbers: no end of distinct draws
+            whole = values.whole_numbers()
+            if whole == 0:
+                raise InputError(f"[sweep] {key}: the range [{values.low:g}, {values.high:g}] "
+                                 "holds no whole number")
+            distinct *= whole
+            factors.append(f"{key} ({whole} whole numbers)")
+            if distinct > self.sample:
+                return
+        if self.sample > distinct:
+            if not any(isinstance(v, Range) for v in self.parameters.values()):
+                raise InputError(f"[sweep] sample = {self.sample} but the grid has only "
+                                 f"{distinct} designs; drop sample to run them all")
+            raise InputError(f"[sweep] sample = {self.sample} but the study has only "
+                             f"{distinct} distinct designs ({' x '.join(factors)}); widen the "
+                             "ranges or lower sample")
+
+    @property
+    def count(self) -> int:
+        """The number of designs: ``sample``, or the size of the grid; counted without
+        building any (at most :data:`MAX_DESIGNS`)."""
+        return self.grid_size() if self.sample is None else self.sample
+
+    def grid_size(self) -> int:
+        """Cases (at least one) x the product of the lists' lengths: the number of designs
+        of the grid, which ``sample`` draws from when the study has no range."""
+        return math.prod([len(self.cases) or 1] + [len(v) for v in self.parameters.values()
+                                                   if not isinstance(v, Range)])
 
     # -------------------------------------------------------------- loading
     @classmethod
@@ -259,7 +374,7 @@ class Study:
             name = case.pop("name", None)
             flat = dict(_dotted(case, f"[[sweep.cases]] #{i + 1}"))
             if name is not None:
-                flat["name"] = str(name)
+                flat["name"] = name
             named_cases.append(flat)
         return cls(base=base, parameters=parameters, cases=tuple(named_cases), sample=sample,
                    seed=0 if seed is None else seed,
@@ -277,15 +392,15 @@ class Study:
         (cases x product of the lists) or ``sample`` random draws."""
         cases = list(self.cases) or [{}]
         keys = list(self.parameters)
-        if self.sample is None or not any(isinstance(v, Range) for v in self.parameters.values()):
+        ranges = any(isinstance(v, Range) for v in self.parameters.values())
+        if self.sample is None:                  # at most MAX_DESIGNS (__post_init__)
             grid = [(case, dict(zip(keys, combo))) for case in cases
                     for combo in itertools.product(*(self.parameters[k] for k in keys))]
-            if self.sample is not None:
-                if self.sample > len(grid):
-                    raise InputError(f"[sweep] sample = {self.sample} but the grid has only "
-                                     f"{len(grid)} designs; drop sample to run them all")
-                rng = np.random.default_rng(self.seed)
-                grid = [grid[int(i)] for i in rng.choice(len(grid), self.sample, replace=False)]
+        elif not ranges and self.grid_size() <= MAX_INDEX:
+            # the K indices of the grid in product order, without building the grid
+            rng = np.random.default_rng(self.seed)
+            grid = [self._grid_point(int(i))
+                    for i in rng.choice(self.grid_size(), self.sample, replace=False)]
         else:
             rng = np.random.default_rng(self.seed)
             grid, drawn = [], set()
@@ -293,7 +408,7 @@ class Study:
                 case = cases[int(rng.integers(len(cases)))]
                 values = {k: v.draw(rng, k in INTEGER_KEYS) if isinstance(v, Range)
                           else v[int(rng.integers(len(v)))] for k, v in self.parameters.items()}
-                key = _canonical([case, values])
+                key = _canonical([case, values], lenient=True)
                 if key not in drawn:
                     drawn.add(key)
                     grid.append((case, values))
@@ -305,6 +420,17 @@ class Study:
                                  "lower sample")
         return [(case.get("name"), {**{k: v for k, v in case.items() if k != "name"}, **values})
                 for case, values in grid]
+
+    def _grid_point(self, index: int) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The ``index``-th (case, values) of the grid in the order of
+        ``itertools.product(cases, *lists)`` (the last list varies fastest)."""
+        values: dict[str, Any] = {}
+        for key in reversed(list(self.parameters)):
+            items = self.parameters[key]
+            index, at = divmod(index, len(items))
+            values[key] = items[at]
+        case = self.cases[index] if self.cases else {}
+        return case, {k: values[k] for k in self.parameters}
 
     def designs(self) -> list[Design]:
         """Every design of the study, each validated (an invalid combination raises
@@ -320,7 +446,7 @@ class Study:
         designs: list[Design] = []
         seen: dict[str, str] = {}
         short = _short_names(self.swept)
-        for case, overrides in self.points():
+        for case, overrides in self.points():     # names: safe pieces only (_label)
             label = " ".join(f"{short[k]}={_label(v)}" for k, v in overrides.items()
                              if case is None or k in self.parameters)
             name = " ".join(p for p in (case, label) if p) or "base"
@@ -328,8 +454,8 @@ class Study:
             design = Design(id=design_id(config), name=name, params=overrides, config=config,
                             case=case or "", trust=self.trust)
             if design.id in seen:
-                raise InputError(f"designs {seen[design.id]!r} and {name!r} are the same problem "
-                                 f"(id {design.id}); remove the duplicate value")
+                raise InputError(f"designs '{seen[design.id]}' and '{name}' are the same "
+                                 f"problem (id {design.id}); remove the duplicate value")
             seen[design.id] = name
             designs.append(design)
         return designs
@@ -341,7 +467,8 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
     """The full configuration {"target", "design", "solve"} of ``base`` with the dotted
     ``overrides`` applied, every default filled in (via :class:`DesignProblem` and
     :class:`SolveOptions`), validated, and refused when this machine cannot hold its solve
-    (:func:`rffqm_nlp.design.check_memory`).
+    (:func:`rffqm_nlp.design.check_memory`). ``name`` names the design in the errors, as it
+    is: a design's name is made of safe pieces (:meth:`Study.designs`).
 
     Setting target.name or target.python starts the target table afresh; an integer p as
     design.panels means (p, p); ``root`` and ``trust`` as for
@@ -360,9 +487,12 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
         problem, options = problem_from_config(tables, root, trust)
         check_memory(problem, options)
     except InputError as exc:
-        raise InputError(f"design {name!r}: {exc}") from None
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"design {name!r}: bad value ({type(exc).__name__}: {exc})") from None
+        raise InputError(f"design '{name}': {exc}") from None
+    except (TypeError, ValueError, ArithmeticError) as exc:
+        # a library's own text may quote the value: only the kind of the failure is said
+        raise InputError(f"design '{name}': a value of its [target], [design] or [solve] "
+                         f"table is not allowed ({type(exc).__name__}); check the values the "
+                         "study sets for it") from None
     return problem.config(options)
 
 
@@ -687,9 +817,12 @@ def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
         except (RffqmError, OSError, KeyError, TypeError, ValueError, AttributeError):
             return None
         N, M = design.config["design"]["panels"]
-        if (_canonical(result.problem) != _canonical(design.config)
-                or result.folded.shape != (N + 1, M + 1, 3)
-                or result.fit.to_dict() != {k: row[k] for k in FIT_COLUMNS}):
+        try:
+            if (_canonical(result.problem) != _canonical(design.config)
+                    or result.folded.shape != (N + 1, M + 1, 3)
+                    or result.fit.to_dict() != {k: row[k] for k in FIT_COLUMNS}):
+                return None
+        except (TypeError, ValueError, AttributeError):
             return None
     return row
 
@@ -730,8 +863,34 @@ def write_table(out: Path, study: Study, designs: list[Design],
     with atomic_path(out / f"{TABLE_NAME}.parquet") as tmp:
         frame.to_parquet(tmp, index=False)
     with atomic_path(out / f"{TABLE_NAME}.csv") as tmp:
-        frame.to_csv(tmp, index=False)
+        csv_frame(frame).to_csv(tmp, index=False)
     return frame
+
+
+def csv_frame(frame: "pd.DataFrame") -> "pd.DataFrame":
+    """``frame`` for a CSV file: every text cell and column name that begins with one of
+    :data:`CSV_FORMULA_STARTS` (after any spaces) gets a ``'`` before it, so a spreadsheet
+    shows it as text instead of running it as a formula (OWASP's rule against CSV
+    injection). Numbers, negative ones included, stay numbers; ``frame`` is not changed."""
+    import pandas as pd
+
+    safe = frame.copy()
+    for column in safe.columns:
+        cells = safe[column]
+        if cells.dtype == object or isinstance(cells.dtype, pd.StringDtype):
+            safe[column] = pd.Series([csv_text(cell) for cell in cells], index=cells.index,
+                                     dtype=cells.dtype)
+    safe.columns = [csv_text(column) for column in safe.columns]
+    return safe
+
+
+def csv_text(value: Any) -> Any:
+    """A CSV cell: text that a spreadsheet would read as a formula with ``'`` before it,
+    anything else as it is."""
+    if isinstance(value, str) and (value.startswith(CSV_FORMULA_STARTS)
+                                   or value.lstrip(" ").startswith(CSV_FORMULA_STARTS)):
+        return "'" + value
+    return value
 
 
 # --------------------------------------------------------------------------- helpers
@@ -752,26 +911,55 @@ def _base_tables(base: Any, root: Path) -> dict[str, dict[str, Any]]:
     if path.suffix != ".toml":
         raise InputError(f"base must name a design file ending in .toml, got "
                          f"{describe_value(base)}")
-    if not path.exists():
-        raise InputError(f"base: no such design file {path} (paths are relative to the "
-                         "study file)")
+    shown = shown_name(path.name)           # the path itself is the study file's content
     try:
-        tables = check_table(read_toml(path, "base file"), FILE_KEYS, "")
+        exists = path.exists()
+    except (OSError, ValueError):           # a NUL byte, a name too long for the system
+        raise InputError(f"base must name a design file, got {describe_value(base)}, which "
+                         "is no path this system can open") from None
+    if not exists:
+        raise InputError(f"base: no such design file {shown} ({describe_value(base)}; "
+                         "paths are relative to the study file)")
+    try:
+        tables = read_toml(_ShownPath(path, shown), "base file")
+    except InputError as exc:                # names the file by _ShownPath's str
+        raise InputError(str(exc)) from None
+    try:
+        tables = check_table(tables, FILE_KEYS, "")
     except InputError as exc:
-        raise InputError(f"base file {path}: {exc}") from None
+        raise InputError(f"base file {shown}: {exc}") from None
     target = tables.get("target", {})
     if "python" in target:
         try:
             tables["target"] = {**target, "python": resolve_reference(target["python"],
                                                                       path.parent)}
         except InputError as exc:
-            raise InputError(f"base file {path}: {exc}") from None
+            raise InputError(f"base file {shown}: {exc}") from None
     return tables
 
 
+class _ShownPath(os.PathLike):
+    """A path that opens as ``path`` and reads as ``shown`` in messages."""
+
+    def __init__(self, path: Path, shown: str):
+        self.path, self.shown = path, shown
+
+    def __fspath__(self) -> str:
+        return os.fspath(self.path)
+
+    def __str__(self) -> str:
+        return self.shown
+
+
 def _check_key(key: str, where: str = "[sweep]") -> None:
+    """Refuse ``key`` unless it is "<table>.<key>" with a table of :data:`TABLES`, a plain
+    name (:func:`~rffqm_nlp.files.shown_name` shows it as it is: it appears in messages,
+    designs' names and the table's columns) and, for design and solve, a known key."""
+    if not isinstance(key, str):
+        raise InputError(f"{where}: {describe_value(key)} is not a parameter; name one as "
+                         f"\"<table>.<key>\"")
     table, _, item = key.partition(".")
-    if table not in TABLES or not item or "." in item:
+    if table not in TABLES or not item or "." in item or shown_name(item) != item:
         raise InputError(f"{where}: {shown_name(key)} is not a parameter; name one as "
                          f"\"<table>.<key>\" with table one of {', '.join(TABLES)} (e.g. "
                          "\"target.radius\", \"design.panels\", \"solve.seed\")")
@@ -815,8 +1003,33 @@ def _range_or_list(key: str, value: Any) -> list | Range:
         try:
             return Range(**value)
         except InputError as exc:
-            raise InputError(f"[sweep] {key}: {exc}") from None
+            raise InputError(f"[sweep] {shown_name(key)}: {exc}") from None
     return value
+
+
+def _check_whole_range(key: str, values: Range) -> None:
+    """Refuse a range of whole numbers with a bound beyond :data:`MAX_WHOLE`."""
+    for bound, value in (("low", values.low), ("high", values.high)):
+        if abs(value) > MAX_WHOLE:
+            raise InputError(f"[sweep] {key}: {bound} must be a number in [-2**53, 2**53] "
+                             f"(a range of whole numbers), got {describe_value(value)}")
+
+
+def _check_depth(value: Any, where: str) -> None:
+    """Refuse a value nested deeper than :data:`MAX_DEPTH` lists or tables."""
+    level = [value]
+    for _ in range(MAX_DEPTH + 1):
+        level = [item for v in level if isinstance(v, (list, tuple, dict))
+                 for item in (v.values() if isinstance(v, dict) else v)]
+        if not level:
+            return
+    raise InputError(f"{where}: a value nests lists or tables more than {MAX_DEPTH} deep")
+
+
+def _count_text(count: int) -> str:
+    """A count of designs for a message: itself, or the power of ten it exceeds when long."""
+    digits = len(str(count))
+    return str(count) if digits <= 15 else f"more than 10**{digits - 1}"
 
 
 def _short_names(keys: list[str]) -> dict[str, str]:
@@ -830,12 +1043,20 @@ def _label(value: Any) -> str:
     error messages, which never quote a file's content)."""
     if isinstance(value, float):
         return f"{value:.4g}"
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value) if abs(value) < 10 ** 15 else f"({describe_value(value)})"
     if isinstance(value, list) and value and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-        return "x".join(_label(v) for v in value)
-    if isinstance(value, (list, dict)):
-        return json.dumps(_shown_strings(value), separators=(",", ":"))
-    return shown_name(value) if isinstance(value, str) else str(value)
+        text = "x".join(_label(v) for v in value)
+    elif isinstance(value, (list, dict)):
+        text = json.dumps(_shown_strings(value), separators=(",", ":"))
+    elif isinstance(value, str):
+        return shown_name(value)
+    elif isinstance(value, (bool, type(None))):
+        return str(value)
+    else:                                    # e.g. a TOML date: by its kind
+        return f"({describe_value(value)})"
+    return text if len(text) <= MAX_LABEL else f"({describe_value(value)})"
 
 
 def _shown_strings(value: Any) -> Any:
@@ -844,14 +1065,17 @@ def _shown_strings(value: Any) -> Any:
         return {shown_name(k): _shown_strings(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_shown_strings(v) for v in value]
-    return shown_name(value) if isinstance(value, str) else value
+    if isinstance(value, str):
+        return shown_name(value)
+    return value if isinstance(value, (int, float, bool, type(None))) else \
+        f"({describe_value(value)})"
 
 
 def _cell(value: Any) -> Any:
     """A table cell: numbers, strings and booleans as they are, others as compact JSON."""
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
-    return json.dumps(value, separators=(",", ":"))
+    return json.dumps(value, separators=(",", ":"), default=str)
 
 
 def _homogeneous(column: "pd.Series") -> "pd.Series":
@@ -861,11 +1085,14 @@ def _homogeneous(column: "pd.Series") -> "pd.Series":
     if kinds <= {int, float} and len(kinds) > 1:
         return column.astype("float64")
     if len(kinds) > 1:
-        return column.map(lambda v: v if v is None or isinstance(v, str) else json.dumps(v))
+        return column.map(lambda v: v if v is None or isinstance(v, str)
+                          else json.dumps(v, default=str))
     return column
 
 
-def _canonical(config: Any) -> str:
+def _canonical(config: Any, lenient: bool = False) -> str:
+    """``config`` as canonical JSON (keys sorted, whole numbers as floats). ``lenient``
+    (to tell raw drawn values apart): NaN allowed, any other value by its repr."""
     def norm(v: Any) -> Any:
         if isinstance(v, dict):
             return {str(k): norm(x) for k, x in v.items()}
@@ -875,4 +1102,5 @@ def _canonical(config: Any) -> str:
             return float(v)
         return v
 
-    return json.dumps(norm(config), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return json.dumps(norm(config), sort_keys=True, separators=(",", ":"), allow_nan=lenient,
+                      default=repr if lenient else None)

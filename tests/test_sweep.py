@@ -207,7 +207,7 @@ BAD_STUDIES = [
     ("[sweep]\n\"design.layout\" = [\"zigzag\"]\n", "layout must be one of"),
     ("[sweep]\n\"design.panels\" = [5]\n", "[design] panels[0] must be an even whole number"),
     ("[solve]\nstarts = 3\n", "unknown key [solve] starts; did you mean multistart?"),
-    ("[sweep]\n\"solve.multistart\" = [0]\n", "multistart must be a whole number >= 1"),
+    ("[sweep]\n\"solve.multistart\" = [0]\n", "[solve] multistart must be a whole number"),
     ("[sweep]\n\"solve.starts\" = [1]\n", "unknown solve key starts"),
     ("[design]\nstop_rms = 0.01\n", "[design] stop_rms is a solve option: move it to the "
                                    "[solve] table"),
