@@ -74,7 +74,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from threadpoolctl import OpenBLASController, register, threadpool_limits
 
-from .design import FILE_KEYS, DesignProblem, SolveOptions, check_memory
+from .design import FILE_KEYS, SOLVE_KEYS, DesignProblem, SolveOptions, check_memory
 from .design import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
 from .files import (Key, atomic_path, check_table, check_value, describe_value, read_json,
@@ -965,18 +965,13 @@ def _check_key(key: str, where: str = "[sweep]") -> None:
                          "\"target.radius\", \"design.panels\", \"solve.seed\")")
     known = {"design": [f.name for f in dataclasses.fields(DesignProblem)
                         if f.name != "target"],
-             "solve": _solve_keys()}.get(table)
+             "solve": list(SOLVE_KEYS)}.get(table)
     if known is not None and item not in known:
         close = difflib.get_close_matches(item, known, n=1)
         hint = f"did you mean {table}.{close[0]}?" if close else f"known: {', '.join(known)}"
-        if table == "design" and item in _solve_keys():
+        if table == "design" and item in SOLVE_KEYS:
             hint = f"it is a solve option: sweep \"solve.{item}\""
         raise InputError(f"{where}: unknown {table} key {shown_name(item)}; {hint}")
-
-
-def _solve_keys() -> list[str]:
-    """The keys of a [solve] table: the fields of SolveOptions."""
-    return [f.name for f in dataclasses.fields(SolveOptions)]
 
 
 def _dotted(table: Mapping[str, Any], where: str) -> Iterator[tuple[str, Any]]:

@@ -324,3 +324,13 @@ def test_a_study_built_in_python_is_checked_too():
                       parameters={"design.omega0": [0.5]},
                       cases=[{"name": "R=3 big", "target.radius": 3.0}])
     assert [d.name for d in ok.designs()] == ["R=3 big omega0=0.5"]
+
+
+def test_a_study_cannot_sweep_trust(tmp_path):
+    """trust is the caller's word: a study cannot set it for its designs."""
+    base = tmp_path / "base.toml"
+    base.write_text('[target]\nname = "sphere_cap"\n[design]\npanels = [4, 4]\n')
+    study = tmp_path / "study.toml"
+    study.write_text('base = "base.toml"\n[sweep]\n"solve.trust" = [true]\n')
+    with pytest.raises(InputError, match=r"unknown solve key trust"):
+        sweeps.Study.load(study).designs()
