@@ -177,6 +177,29 @@ def _toml_problem(exc: Exception) -> str:
     return f"{reason} ({match[1]})" if match else reason
 
 
+def named_path(root: str | os.PathLike, name: Any, key: str, trust: bool = False) -> Path:
+    """The path ``name`` that a file names under ``key`` (e.g. "base"), relative to
+    ``root``, the folder of the file that names it.
+
+    A file from someone else opens nothing outside its own folder: unless ``trust``, a path
+    that leaves ``root`` (absolute, through "..", or by a symbolic link) is refused in one
+    :class:`InputError` line, and so is one that this system cannot open (a NUL byte, a
+    name too long). No message quotes the path.
+    """
+    check_value(name, Key("string"), key)
+    try:
+        path = Path(root) / name
+        inside = path.resolve().is_relative_to(Path(root).resolve())
+    except (OSError, ValueError, RuntimeError):
+        raise InputError(f"{key} must name a file, got {describe_value(name)}, which is no "
+                         "path this system can open") from None
+    if not inside and not trust:
+        raise InputError(f"{key} names a file outside the folder of the file that names it "
+                         f"({describe_value(name)}); move the file there, or pass --trust "
+                         "(trust=True in the API) if you trust the file")
+    return path
+
+
 # --------------------------------------------------------------------------- single files
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:

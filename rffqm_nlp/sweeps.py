@@ -77,8 +77,8 @@ from threadpoolctl import OpenBLASController, register, threadpool_limits
 from .design import FILE_KEYS, SOLVE_KEYS, DesignProblem, SolveOptions, check_memory
 from .design import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
-from .files import (Key, atomic_path, check_table, check_value, describe_value, read_json,
-                    read_toml, shown_name, write_json)
+from .files import (Key, atomic_path, check_table, check_value, describe_value, named_path,
+                    read_json, read_toml, shown_name, write_json)
 from .surfaces import resolve_reference
 from .results import DesignResult, Fit, SolveStats
 
@@ -351,7 +351,7 @@ class Study:
         config = check_table(config, STUDY_FILE_KEYS, "")
         base: dict[str, dict] = {table: {} for table in TABLES}
         if "base" in config:
-            for table, values in _base_tables(config["base"], Path(root)).items():
+            for table, values in _base_tables(config["base"], Path(root), trust).items():
                 base[table].update(values)
         for table in TABLES:
             inline = config.get(table, {})
@@ -902,19 +902,19 @@ def _require_extra(serial: bool) -> None:
         raise RffqmError(f"sweeps need {', '.join(missing)}: pip install 'rffqm_nlp[sweep]'")
 
 
-def _base_tables(base: Any, root: Path) -> dict[str, dict[str, Any]]:
+def _base_tables(base: Any, root: Path, trust: bool) -> dict[str, dict[str, Any]]:
     """The tables of the design file ``base`` (relative to ``root``), a target's
     ``python = "file.py:..."`` made relative to that file. Anything but the path of a .toml
-    file is refused before it is opened; no message quotes the file's content."""
-    check_value(base, Key("string"), "base")
-    path = root / base
+    file inside ``root`` (anywhere with ``trust``, :func:`rffqm_nlp.files.named_path`) is
+    refused before it is opened; no message quotes the file's content."""
+    path = named_path(root, base, "base", trust)
     if path.suffix != ".toml":
         raise InputError(f"base must name a design file ending in .toml, got "
                          f"{describe_value(base)}")
     shown = shown_name(path.name)           # the path itself is the study file's content
     try:
         exists = path.exists()
-    except (OSError, ValueError):           # a NUL byte, a name too long for the system
+    except (OSError, ValueError):           # a name too long for the system
         raise InputError(f"base must name a design file, got {describe_value(base)}, which "
                          "is no path this system can open") from None
     if not exists:

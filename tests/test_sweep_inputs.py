@@ -334,3 +334,23 @@ def test_a_study_cannot_sweep_trust(tmp_path):
     study.write_text('base = "base.toml"\n[sweep]\n"solve.trust" = [true]\n')
     with pytest.raises(InputError, match=r"unknown solve key trust"):
         sweeps.Study.load(study).designs()
+
+
+@pytest.mark.parametrize("how", ["absolute", "dots", "link"])
+def test_a_study_opens_no_base_outside_its_folder(tmp_path, how):
+    """A path a study names stays inside the study's folder unless the caller trusts it."""
+    outside = tmp_path / "private" / "mine.toml"
+    outside.parent.mkdir()
+    outside.write_text('[target]\nname = "sphere_cap"\n')
+    folder = tmp_path / "downloads"
+    folder.mkdir()
+    (folder / "link.toml").symlink_to(outside)
+    base = {"absolute": str(outside), "dots": "../private/mine.toml", "link": "link.toml"}[how]
+    study = folder / "study.toml"
+    study.write_text(f'base = "{base}"\n[sweep]\n"design.layout" = ["zigzag_j"]\n')
+    with pytest.raises(InputError, match="base names a file outside the folder") as info:
+        sweeps.Study.load(study)
+    assert "private" not in str(info.value)
+    assert sweeps.Study.load(study, trust=True).count == 1
+    result = runner.invoke(app, ["sweep", str(study), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "outside the folder" in result.stderr
