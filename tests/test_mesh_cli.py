@@ -4,6 +4,7 @@ the design, its files, and one line with exit status 2 for every bad shape file.
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -55,8 +56,33 @@ def _folder(folder: Path) -> Path:
     return folder / "part.stl"
 
 
+def _archive(folder: Path) -> Path:
+    with zipfile.ZipFile(folder / "part.zip", "w") as archive:
+        archive.writestr("part.obj", trimesh.exchange.obj.export_obj(
+            rq.surfaces.get("sphere_cap", **CAP).mesh(9, 9)))
+    return folder / "part.zip"
+
+
+def _too_large_file(folder: Path) -> Path:
+    with open(folder / "part.stl", "wb") as handle:
+        handle.truncate(rq.meshes.MAX_FILE_BYTES + 1)  # sparse: nothing written
+    return folder / "part.stl"
+
+
+def _too_many_triangles(folder: Path) -> Path:
+    return cap_mesh(folder, "part.stl", n=225)  # 100352 triangles
+
+
+SECRET = "SECRETTOKEN"
 GARBAGE = np.random.default_rng(0).bytes(4000)
 BAD_FILES = [
+    ("archive", _archive, ["part.zip", "archives are not unpacked"]),
+    ("too-large", _too_large_file, ["part.stl", "more than the 50 MB read", "decimate"]),
+    ("too-many-triangles", _too_many_triangles,
+     ["part.stl", "100352 triangles", "decimate it to at most 100000"]),
+    ("quoting-ply", _written("part.ply", f"ply\nformat ascii 1.0\nelement vertex 3\nproperty "
+                                         f"{SECRET} x\nend_header\n1\n2\n3\n".encode()),
+     ["part.ply", "could not be parsed as a PLY file"]),
     ("empty", _written("part.stl", b""), ["part.stl", "no triangles and no points"]),
     ("garbage-stl", _written("part.stl", GARBAGE), ["cannot read", "part.stl"]),
     ("garbage-ply", _written("part.ply", GARBAGE), ["cannot read", "part.ply"]),
@@ -79,6 +105,7 @@ def test_bad_shape_files_are_refused_in_one_line(tmp_path, make, fragments):
     lines = [line for line in res.stderr.splitlines() if line.strip()]
     assert res.exit_code == 2, (res.exit_code, res.output)
     assert len(lines) == 1 and "Traceback" not in res.output, res.output
+    assert SECRET not in res.output
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
     assert not out.exists()

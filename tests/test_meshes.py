@@ -1,7 +1,11 @@
 """rffqm_nlp.meshes: meshes and point clouds as target surfaces (Mesh), their topology
 checks, parametrization, spline fit and distances to the shape."""
 
+import json
+import logging
 import re
+import time
+import zipfile
 
 import casadi as ca
 import numpy as np
@@ -365,3 +369,168 @@ def test_the_spline_is_its_edge_a_round_off_outside_its_domain():
     mid = 0.5 * (v0 + v1)
     np.testing.assert_allclose(jac(u0, mid).full(), jac(u0 + 1e-6 * (u1 - u0), mid).full(),
                                atol=1e-4)
+
+
+# -- files from others: inert, bounded, and refused in one line that quotes none of them ---
+
+SECRET = "SECRETTOKEN"
+
+
+def test_a_flipped_triangle_is_turned_back(tmp_path):
+    """One triangle of an OBJ wound the other way: trimesh's winding repair (which needs
+    networkx) turns it back, and the Mesh is the unflipped file's."""
+    mesh = rq.surfaces.get("sphere_cap", radius=4.0, domain=[[-0.6, 0.6], [-0.4, 0.4]]
+                           ).mesh(21, 15)
+    faces = mesh.faces.copy()
+    faces[40] = faces[40][::-1]
+    trimesh.Trimesh(mesh.vertices, faces, process=False).export(tmp_path / "flipped.obj")
+    mesh.export(tmp_path / "good.obj")
+    flipped, good = Mesh(tmp_path / "flipped.obj"), Mesh(tmp_path / "good.obj")
+    assert not trimesh.Trimesh(mesh.vertices, faces, process=False).is_winding_consistent
+    assert flipped.mesh.is_winding_consistent
+    assert flipped.parametrization == good.parametrization == "rectangle"
+    np.testing.assert_allclose(flipped.lattice(6, 6), good.lattice(6, 6), atol=1e-12)
+
+
+def test_a_failure_inside_trimesh_is_one_line_without_its_text(monkeypatch):
+    def broken(mesh):
+        raise ValueError(f"{SECRET} from inside trimesh")
+
+    monkeypatch.setattr(trimesh.repair, "fix_winding", broken)
+    mesh = _plane_grid(7)
+    faces = mesh.faces.copy()
+    faces[3] = faces[3][::-1]
+    with pytest.raises(SurfaceError) as info:
+        Mesh((mesh.vertices, faces))
+    message = str(info.value)
+    assert "winding" in message and SECRET not in message and "\n" not in message
+
+
+@pytest.mark.parametrize("name", ["part\x00.stl", "a\x00/part.obj"])
+def test_a_nul_in_the_path_is_one_line(tmp_path, name):
+    for path in (tmp_path / name, str(tmp_path / name)):
+        with pytest.raises(SurfaceError) as info:
+            Mesh(path)
+        message = str(info.value)
+        assert "NUL" in message and "\x00" not in message and "\n" not in message
+
+
+def _gltf_naming(folder) -> str:
+    """A glTF whose one buffer is the file SECRETTOKEN.bin next to it (three vertices)."""
+    (folder / f"{SECRET}.bin").write_bytes(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                                                    dtype="<f4").tobytes())
+    return json.dumps({
+        "asset": {"version": "2.0"}, "buffers": [{"uri": f"{SECRET}.bin", "byteLength": 36}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}], "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}], "scene": 0})
+
+
+@pytest.mark.parametrize("name, content, kind", [
+    # trimesh's messages quoted these tokens (a PLY property type, an OFF count)
+    ("part.ply", f"ply\nformat ascii 1.0\nelement vertex 3\nproperty {SECRET} x\nend_header\n"
+                 "1\n2\n3\n", "a PLY"),
+    ("part.off", f"OFF\n{SECRET} 1 2\n", "an OFF"),
+    # ... and this buffer's name; the buffer next to it is not even read (else: 3 points)
+    ("part.gltf", _gltf_naming, "a glTF"),
+])
+def test_unparsable_files_are_refused_without_quoting_them(tmp_path, name, content, kind):
+    path = tmp_path / name
+    path.write_text(content if isinstance(content, str) else content(tmp_path))
+    with pytest.raises(SurfaceError) as info:
+        Mesh(path)
+    message = str(info.value)
+    assert f"could not be parsed as {kind} file" in message, message
+    assert SECRET not in message and "\n" not in message
+
+
+def test_trimesh_logs_nothing_of_a_file(tmp_path, caplog):
+    """trimesh logs names from the file (here a material's, at debug level); nothing it logs
+    while a Mesh reads a file gets out, and its logger's level is put back."""
+    caplog.set_level(logging.DEBUG, logger="trimesh")
+    text = trimesh.exchange.obj.export_obj(_plane_grid(9))
+    (tmp_path / "part.obj").write_text(f"mtllib {SECRET}.mtl\nusemtl {SECRET}\n{text}")
+    (tmp_path / f"{SECRET}.mtl").write_text("newmtl x\nmap_Kd secret.png\n")
+    mesh = Mesh(tmp_path / "part.obj")
+    assert len(mesh.points) == 81
+    assert SECRET not in caplog.text
+    assert logging.getLogger("trimesh").level == logging.DEBUG
+
+
+@pytest.mark.parametrize("name", ["part.zip", "part.tar.gz", "part.bz2", "part.dxf"])
+def test_archives_and_drawings_are_not_read(tmp_path, name):
+    """An archive's unpacked size is not bounded by its file's: not unpacked (a file the
+    command line still takes for a mesh, so it says so)."""
+    path = tmp_path / name
+    if name.endswith(".zip"):
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("part.obj", trimesh.exchange.obj.export_obj(_plane_grid(9)))
+    else:
+        path.write_bytes(b"0" * 100)
+    assert meshes.is_mesh_file(path) is (name != "part.tar.gz")  # its suffix: .gz
+    with pytest.raises(SurfaceError, match="names no format read here .archives are not "
+                                           "unpacked.; give an OBJ"):
+        Mesh(path)
+
+
+def test_a_device_is_not_read():
+    with pytest.raises(SurfaceError, match="no regular file"):
+        Mesh("/dev/zero")
+
+
+def _flat_grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    return np.c_[u.ravel(), v.ravel(), np.zeros(n * n)], rq.surfaces.grid_faces(n, n)
+
+
+@pytest.mark.parametrize("make, found", [
+    (lambda: _flat_grid(225), f"100352 triangles, more than a Mesh takes ({meshes.MAX_FACES} "
+                              f"triangles"),
+    (lambda: (np.random.default_rng(0).normal(size=(3 * meshes.MAX_FACES + 1, 3)),
+              np.array([[0, 1, 2]])), f"{3 * meshes.MAX_FACES + 1} vertices"),
+    (lambda: np.random.default_rng(0).normal(size=(meshes.MAX_POINTS + 1, 3)),
+     f"{meshes.MAX_POINTS + 1} points, more than a Mesh takes"),
+])
+def test_too_large_shapes_are_refused_before_any_work(make, found):
+    source = make()
+    start = time.perf_counter()
+    with pytest.raises(SurfaceError) as info:
+        Mesh(source)
+    assert time.perf_counter() - start < 5.0  # a mesh at the limit takes seconds
+    message = str(info.value)
+    assert found in message and ("decimate" in message or "subsample" in message), message
+
+
+def test_a_file_larger_than_the_limit_is_not_read(tmp_path):
+    path = tmp_path / "part.stl"
+    with open(path, "wb") as handle:
+        handle.truncate(meshes.MAX_FILE_BYTES + 1)  # sparse: nothing written
+    with pytest.raises(SurfaceError, match=r"part\.stl as a mesh: it is 50 MB, more than "
+                                           r"the 50 MB read; decimate"):
+        Mesh(path)
+
+
+def _scene(piece: trimesh.Trimesh, placements: int) -> bytes:
+    """A GLB placing one geometry ``placements`` times (instances share it in the file)."""
+    scene = trimesh.Scene()
+    scene.add_geometry(piece, geom_name="piece", node_name="n0")
+    for k in range(1, placements):
+        move = np.eye(4)
+        move[0, 3] = 3.0 * k
+        scene.graph.update(frame_to=f"n{k}", frame_from=scene.graph.base_frame, matrix=move,
+                           geometry="piece")
+    return scene.export(file_type="glb")
+
+
+@pytest.mark.parametrize("pieces, n, found", [
+    (meshes.MAX_PIECES + 1, 5, f"{meshes.MAX_PIECES + 1} pieces, more than a Mesh joins"),
+    (2, 160, "101124 triangles, more than a Mesh takes"),  # 2 x 50562
+])
+def test_a_scene_too_large_is_refused_before_its_pieces_are_joined(tmp_path, pieces, n,
+                                                                   found):
+    path = tmp_path / "part.glb"
+    path.write_bytes(_scene(_plane_grid(n), pieces))
+    assert path.stat().st_size < meshes.MAX_FILE_BYTES
+    with pytest.raises(SurfaceError, match=re.escape(found)):
+        Mesh(path)
