@@ -14,6 +14,7 @@ options: docs/solvers.md.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -836,7 +837,8 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
     from .meshes import is_mesh_file  # here: meshes imports surfaces, which imports Mesh
 
     if is_mesh_file(path):
-        return DesignProblem(surfaces.Mesh(Path(path).resolve())), SolveOptions()
+        # abspath, not resolve: a path this system cannot open (a NUL) is Mesh's to refuse
+        return DesignProblem(surfaces.Mesh(Path(os.path.abspath(path)))), SolveOptions()
     return from_config(read_toml(path, "design file"), Path(path).parent, trust)
 
 

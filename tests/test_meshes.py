@@ -413,6 +413,8 @@ def test_a_nul_in_the_path_is_one_line(tmp_path, name):
             Mesh(path)
         message = str(info.value)
         assert "NUL" in message and "\x00" not in message and "\n" not in message
+    with pytest.raises(SurfaceError, match="NUL"):      # as the command line's argument
+        rq.load_design(str(tmp_path / name))
 
 
 def _gltf_naming(folder) -> str:
