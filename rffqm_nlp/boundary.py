@@ -14,22 +14,63 @@ Boundary data:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
+from .backend import check_argument, describe_argument, finite_array
 from .errors import BoundaryDataError, InputError
+from .files import Key
 
 Layout = Literal["zigzag_j", "zigzag_i"]
 LAYOUTS: tuple[str, ...] = ("zigzag_j", "zigzag_i")
 
 #: |cos(beta) - sigma cos(alpha)| below this means sigma is not in MV(alpha, beta).
 MV_TOL = 1e-10
+#: Most panels along one side of a pattern that the API takes (N, M): the boundary data
+#: of N x M panels are small, but its march holds every panel, and a side of 100,000
+#: already needs far more memory than a workstation has for anything but a thin strip.
+MAX_SIDE = 100_000
+#: Largest seed of the random perturbations (the [solve] seed's bound).
+MAX_SEED = 2**63 - 1
+
+_SIDE = Key("whole", low=1, high=MAX_SIDE, hint="(panels)")
+_SEED = Key("whole", low=0, high=MAX_SEED, hint="(or None)")
+_ANGLE = Key("number")
+_ACUTE = Key("number", low=0.0, high=np.pi / 2, low_open=True, high_open=True,
+             hint="(an acute angle, radians)")
+_LENGTH = Key("number", low=0.0, low_open=True, hint="(a length)")
+_LAYOUT = Key("choice", choices=LAYOUTS)
+
+
+def check_size(N: Any, M: Any) -> tuple[int, int]:
+    """(N, M), a pattern's panel rows and columns, checked: whole numbers in
+    [1, :data:`MAX_SIDE`]; else one :class:`InputError` line naming N or M."""
+    return check_argument(N, _SIDE, "N"), check_argument(M, _SIDE, "M")
+
+
+def check_boundary(bd: Any, name: str = "bd") -> "BoundaryData":
+    """``bd`` if it is :class:`BoundaryData`, else an :class:`InputError` naming ``name``
+    and what it got (a Pattern, a dict, ...)."""
+    if not isinstance(bd, BoundaryData):
+        raise InputError(f"{name} must be boundary data (rffqm_nlp.BoundaryData, e.g. from "
+                         f"miura_boundary), got {describe_argument(bd)}")
+    return bd
 
 
 def mv_set(alpha: float, beta: float, tol: float = MV_TOL) -> tuple[int, ...]:
-    """The admissible mountain-valley signs MV(alpha, beta) of Theorem 2.1 (eq:foldParams)."""
+    """The admissible mountain-valley signs MV(alpha, beta) of Theorem 2.1 (eq:foldParams).
+
+    ``alpha``, ``beta`` finite numbers (radians), ``tol`` >= 0; else :class:`InputError`."""
+    alpha = check_argument(alpha, _ANGLE, "alpha")
+    beta = check_argument(beta, _ANGLE, "beta")
+    tol = check_argument(tol, Key("number", low=0.0), "tol")
+    return _mv_set(alpha, beta, tol)
+
+
+def _mv_set(alpha: float, beta: float, tol: float = MV_TOL) -> tuple[int, ...]:
     return tuple(s for s in (1, -1) if abs(np.cos(beta) - s * np.cos(alpha)) > tol)
 
 
@@ -65,8 +106,8 @@ class BoundaryData:
             for k, val in enumerate(arr, start=1):
                 if not np.isfinite(val) or val <= 0:
                     raise BoundaryDataError(
-                        f"{name}[{k - 1}] = {val!r} ({where.format(k=k)}) must be a finite "
-                        "positive length", vertex=None, value=val)
+                        f"{name}[{k - 1}] = {float(val)!r} ({where.format(k=k)}) must be a "
+                        "finite positive length", vertex=None, value=val)
         for name, arr in (("left", left), ("bottom", bottom), ("l_left", l_left),
                           ("l_bottom", l_bottom)):
             arr.setflags(write=False)
@@ -105,17 +146,20 @@ class BoundaryData:
     @classmethod
     def from_vector(cls, x: np.ndarray, sigma: np.ndarray, N: int, M: int) -> "BoundaryData":
         """Inverse of :meth:`to_vector`, with the boundary signs ``sigma`` (N+1+M,)."""
-        x = np.asarray(x, dtype=float).ravel()
+        N, M = check_size(N, M)
         nv = N + 1 + M
-        if x.shape != (2 * nv + N + M,):
-            raise InputError(f"design vector must have length {2 * nv + N + M}, got {x.shape}")
-        tri = np.column_stack([x[:nv], x[nv:2 * nv], np.asarray(sigma, dtype=float)])
+        x = finite_array(x, "x", shape=(2 * nv + N + M,),
+                         allowed=f"a design vector of {2 * nv + N + M} finite numbers")
+        sigma = finite_array(sigma, "sigma", shape=(nv,),
+                             allowed=f"{nv} mountain-valley signs (+1 or -1)")
+        tri = np.column_stack([x[:nv], x[nv:2 * nv], sigma])
         return cls(left=tri[: N + 1], bottom=tri[N + 1:], l_left=x[2 * nv: 2 * nv + N],
                    l_bottom=x[2 * nv + N:])
 
     def with_lengths(self, lengths: np.ndarray) -> "BoundaryData":
         """The same angles with new boundary lengths ell (N+M,)."""
-        lengths = np.asarray(lengths, dtype=float)
+        lengths = finite_array(lengths, "lengths", shape=(self.N + self.M,),
+                               allowed=f"N + M = {self.N + self.M} finite positive lengths")
         return BoundaryData(self.left, self.bottom, lengths[: self.N], lengths[self.N:])
 
     def to_dict(self) -> dict:
@@ -125,43 +169,62 @@ class BoundaryData:
     @classmethod
     def from_dict(cls, d: dict) -> "BoundaryData":
         """Inverse of :meth:`to_dict`."""
-        try:
-            return cls(**{k: np.asarray(d[k], dtype=float)
-                          for k in ("left", "bottom", "l_left", "l_bottom")})
-        except KeyError as exc:
-            raise InputError(f"boundary data is missing the field {exc.args[0]!r}") from None
+        if not isinstance(d, Mapping):
+            raise InputError(f"boundary data must be a table of left, bottom, l_left and "
+                             f"l_bottom, got {describe_argument(d)}")
+        fields = ("left", "bottom", "l_left", "l_bottom")
+        for k in fields:
+            if k not in d:
+                raise InputError(f"boundary data is missing the field {k!r}")
+        return cls(**{k: d[k] for k in fields})
 
 
 def _as_float_array(x, name: str) -> np.ndarray:
+    """``x`` as a (new) float array of real numbers (NaN and infinity pass: the vertex
+    and side checks name them where they are)."""
+    if isinstance(x, (str, bytes, Mapping)) or x is None:
+        raise InputError(f"{name} must be an array of numbers, got {describe_argument(x)}")
     try:
-        arr = np.array(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be an array of numbers: {exc}") from None
-    return arr
+        raw = np.asarray(x)
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        raise InputError(f"{name} must be an array of numbers, got a ragged or mixed "
+                         "list") from None
+    if raw.dtype.kind not in "iuf":
+        raise InputError(f"{name} must be an array of numbers, got "
+                         f"{'booleans' if raw.dtype.kind == 'b' else describe_argument(x)}")
+    return np.array(raw, dtype=float)
 
 
 def _check_vertex(vertex: tuple[int, int], a: float, b: float, s: float) -> None:
     for name, val in (("alpha", a), ("beta", b)):
         if not np.isfinite(val) or not 0.0 < val < np.pi:
             raise BoundaryDataError(
-                f"boundary vertex {vertex}: {name} = {val!r} must lie in (0, pi)",
+                f"boundary vertex {vertex}: {name} = {float(val)!r} must lie in (0, pi)",
                 vertex=vertex, value=val)
     if s not in (1.0, -1.0):
-        raise BoundaryDataError(f"boundary vertex {vertex}: sigma = {s!r} must be +1 or -1",
-                                vertex=vertex, value=s)
+        raise BoundaryDataError(f"boundary vertex {vertex}: sigma = {float(s)!r} must be +1 "
+                                "or -1", vertex=vertex, value=s)
     if abs(a - np.pi / 2) < MV_TOL and abs(b - np.pi / 2) < MV_TOL:
         raise BoundaryDataError(
             f"boundary vertex {vertex}: (alpha, beta) = (pi/2, pi/2) admits no rigid folding "
             "(Theorem 2.1)", vertex=vertex, value=(a, b))
-    if int(s) not in mv_set(a, b):
+    if int(s) not in _mv_set(a, b):
         raise BoundaryDataError(
             f"boundary vertex {vertex}: sigma = {int(s):+d} is not in MV(alpha, beta) = "
-            f"{mv_set(a, b)} for (alpha, beta) = ({a!r}, {b!r}) (eq:foldParams)",
-            vertex=vertex, value=s)
+            f"{_mv_set(a, b)} for (alpha, beta) = ({float(a)!r}, {float(b)!r}) "
+            "(eq:foldParams)", vertex=vertex, value=s)
 
 
 def miura_vertex(i: int, j: int, alpha0: float, layout: Layout) -> tuple[float, float, float]:
     """(alpha, beta, sigma) of vertex (i, j) (1-based) of a Miura-ori (docs/paper.md s.6)."""
+    check_argument(i, Key("whole", low=1), "i")
+    check_argument(j, Key("whole", low=1), "j")
+    alpha0 = check_argument(alpha0, _ACUTE, "alpha0")
+    layout = check_argument(layout, _LAYOUT, "layout")
+    return _miura_vertex(i, j, alpha0, layout)
+
+
+def _miura_vertex(i: int, j: int, alpha0: float, layout: str) -> tuple[float, float, float]:
     if layout == "zigzag_j":
         ang = alpha0 if j % 2 == 1 else np.pi - alpha0
         return ang, ang, -1.0
@@ -177,15 +240,15 @@ def miura_boundary(N: int, M: int, a: float = 1.0, b: float = 1.0, alpha0: float
 
     ``layout="zigzag_j"``: the zig-zag runs along j (alpha = beta, sigma = -1, l_ab = a,
     l_ac = b); ``"zigzag_i"``: along i (beta = pi - alpha, sigma = +1, l_ab = b, l_ac = a).
+    N and M are whole numbers in [1, :data:`MAX_SIDE`], a and b finite positive lengths,
+    alpha0 in (0, pi/2); anything else raises :class:`InputError` naming the argument.
     """
-    N, M = _check_size(N, M)
-    if not (np.isfinite(alpha0) and 0 < alpha0 < np.pi / 2):
-        raise InputError(f"alpha0 must be an acute angle in (0, pi/2), got {alpha0!r}")
-    for name, val in (("a", a), ("b", b)):
-        if not (np.isfinite(val) and val > 0):
-            raise InputError(f"side {name} must be a finite positive length, got {val!r}")
-    left = np.array([miura_vertex(i, 1, alpha0, layout) for i in range(1, N + 2)])
-    bottom = np.array([miura_vertex(1, j, alpha0, layout) for j in range(2, M + 2)])
+    N, M = check_size(N, M)
+    alpha0 = check_argument(alpha0, _ACUTE, "alpha0")
+    a, b = check_argument(a, _LENGTH, "a"), check_argument(b, _LENGTH, "b")
+    layout = check_argument(layout, _LAYOUT, "layout")
+    left = np.array([_miura_vertex(i, 1, alpha0, layout) for i in range(1, N + 2)])
+    bottom = np.array([_miura_vertex(1, j, alpha0, layout) for j in range(2, M + 2)])
     l_ab, l_ac = (a, b) if layout == "zigzag_j" else (b, a)
     return BoundaryData(left, bottom, np.full(N, float(l_ab)), np.full(M, float(l_ac)))
 
@@ -195,11 +258,17 @@ def perturb_angles(bd: BoundaryData, amplitude: float = 0.05 * np.pi,
     """Boundary angles perturbed by U(-amplitude, amplitude), signs and lengths kept.
 
     This is the paper's Fig. Random input (amplitude 0.05 pi around a Miura-ori). Raises
-    :class:`BoundaryDataError` if a perturbed vertex leaves the admissible set.
+    :class:`BoundaryDataError` if a perturbed vertex leaves the admissible set,
+    :class:`InputError` for arguments of the wrong kind: ``bd`` not BoundaryData,
+    ``amplitude`` not a finite number >= 0, ``seed`` neither None, a whole number in
+    [0, 2^63 - 1] nor a numpy Generator.
     """
+    check_boundary(bd)
+    amplitude = check_argument(amplitude, Key("number", low=0.0, hint="(an angle, radians)"),
+                               "amplitude")
+    if seed is not None and not isinstance(seed, np.random.Generator):
+        seed = check_argument(seed, _SEED, "seed")
     rng = np.random.default_rng(seed)
-    if not (np.isfinite(amplitude) and amplitude >= 0):
-        raise InputError(f"amplitude must be a finite non-negative angle, got {amplitude!r}")
     left = bd.left.copy()
     bottom = bd.bottom.copy()
     left[:, :2] += rng.uniform(-amplitude, amplitude, size=left[:, :2].shape)
@@ -223,6 +292,8 @@ def refine(design: BoundaryData, reference: BoundaryData,
     Raises :class:`InputError` unless both Miuras have design's layout and finer is at least
     as large, :class:`BoundaryDataError` where a carried vertex leaves the admissible set.
     """
+    for name, value in (("design", design), ("reference", reference), ("finer", finer)):
+        check_boundary(value, name)
     N, M, N_f, M_f = design.N, design.M, finer.N, finer.M
     if (reference.N, reference.M) != (N, M) or N_f < N or M_f < M:
         raise InputError(f"refine carries a design of N x M panels to N_f x M_f >= N x M with "
@@ -251,10 +322,3 @@ def _carried(values: np.ndarray, n: int, n_f: int, size: int, first: float) -> n
         ours, theirs = np.arange(parity, values.size, 2), np.arange(parity, size, 2)
         out[theirs] = np.interp((theirs + first) / n_f, (ours + first) / n, values[ours])
     return out
-
-
-def _check_size(N, M) -> tuple[int, int]:
-    for name, val in (("N", N), ("M", M)):
-        if int(val) != val or val < 1:
-            raise InputError(f"{name} must be a positive integer number of panels, got {val!r}")
-    return int(N), int(M)

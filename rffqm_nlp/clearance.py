@@ -28,9 +28,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from . import memory
+from .backend import check_argument, describe_argument, finite_array
+from .boundary import check_size
 from .collisions import near_pairs
+from .errors import InputError
+from .files import Key
 from .numpy_model import fold
-from .pattern import Pattern
+from .pattern import Pattern, check_fold_angle, check_pattern
 from .transcription import NLP
 
 #: Pairs closer than min_clearance (1 + MARGIN) are constrained.
@@ -48,6 +53,8 @@ ROUND_PAIRS = 100
 MIN_SINE = 0.1
 #: Panel edges by corner (a, b, c, d) = (0, 1, 2, 3): a-b, a-c, b-d, c-d.
 EDGES = ((0, 1), (0, 2), (1, 3), (2, 3))
+#: A clearance: a distance >= 0 (a sheet thickness).
+_CLEARANCE = Key("number", low=0.0, hint="(a distance)")
 
 
 @dataclass(frozen=True)
@@ -62,7 +69,11 @@ class Closest:
 def closest(pattern: Pattern, omega: float, clearance: float) -> tuple[np.ndarray, Closest]:
     """The pairs (n, 2) (0-based panel indices p = (i-1) M + (j-1)) closer than
     ``clearance`` (1 + MARGIN) in ``pattern`` folded at ``omega``, the closest first and at
-    most :data:`ROUND_PAIRS` of them, and the closest pair."""
+    most :data:`ROUND_PAIRS` of them, and the closest pair. Raises :class:`InputError` for
+    arguments of other kinds (``omega`` one number in [-pi, pi], ``clearance`` >= 0)."""
+    check_pattern(pattern, "pattern")
+    omega = check_fold_angle(omega)
+    clearance = check_argument(clearance, _CLEARANCE, "clearance")
     pairs, dist = near_pairs(pattern, fold(pattern, omega), clearance * (1 + MARGIN))
     order = np.argsort(dist, kind="stable")
     order = order[dist[order] < clearance * (1 + MARGIN)][:ROUND_PAIRS]
@@ -77,7 +88,22 @@ def closest(pattern: Pattern, omega: float, clearance: float) -> tuple[np.ndarra
 def constrain(nlp: NLP, pattern: Pattern, omega: float, pairs: np.ndarray,
               clearance: float) -> NLP:
     """``nlp`` with the clearance rows of ``pairs`` (n, 2), their axes chosen at ``pattern``
-    folded at ``omega`` (see the module docstring)."""
+    folded at ``omega`` (see the module docstring). ``pairs`` are 0-based panel indices of
+    two distinct panels each; :class:`InputError` for arguments of other kinds."""
+    if not isinstance(nlp, NLP):
+        raise InputError(f"nlp must be the design's NLP (rffqm_nlp.transcription.NLP), got "
+                         f"{describe_argument(nlp)}")
+    check_pattern(pattern, "pattern")
+    omega = check_fold_angle(omega)
+    clearance = check_argument(clearance, _CLEARANCE, "clearance")
+    P = pattern.N * pattern.M
+    pairs = finite_array(pairs, "pairs", shape=(None, 2), allowed=f"an (n, 2) array of panel "
+                         f"indices in [0, {P})")
+    if (np.any(pairs != np.round(pairs)) or np.any(pairs < 0) or np.any(pairs >= P)
+            or np.any(pairs[:, 0] == pairs[:, 1])):
+        raise InputError(f"pairs must hold two distinct whole panel indices in [0, {P}) "
+                         "per row")
+    pairs = pairs.astype(np.int64)
     corners = panel_corners(pattern.N, pattern.M)
     V = fold(pattern, omega).reshape(-1, 3)
     Yx, Yy, Yz = nlp.folded(nlp.x)
@@ -95,7 +121,12 @@ def constrain(nlp: NLP, pattern: Pattern, omega: float, pairs: np.ndarray,
 
 def panel_corners(N: int, M: int) -> np.ndarray:
     """Flat (row-major) vertex indices (N M, 4) of the corners a, b, c, d of every panel,
-    panels numbered p = (i-1) M + (j-1)."""
+    panels numbered p = (i-1) M + (j-1). N, M as :func:`rffqm_nlp.boundary.check_size`;
+    :class:`InputError` when the indices need more memory than this machine has left."""
+    N, M = check_size(N, M)
+    need = 64.0 * N * M
+    if need > 1e8:
+        memory.refuse_beyond(need, f"the corners of {N} x {M} panels", "choose fewer panels")
     i, j = np.divmod(np.arange(N * M), M)
     a = i * (M + 1) + j
     return np.stack([a, a + M + 1, a + 1, a + M + 2], axis=1)
@@ -103,7 +134,9 @@ def panel_corners(N: int, M: int) -> np.ndarray:
 
 def choose_axis(P: np.ndarray, Q: np.ndarray) -> tuple[int, float]:
     """The candidate axis (an index into :func:`_candidates`) and sign (+1 or -1) with the
-    largest gap between panels P and Q (4, 3 corners a, b, c, d each)."""
+    largest gap between panels P and Q (4, 3 corners a, b, c, d each, finite numbers)."""
+    P = finite_array(P, "P", shape=(4, 3), allowed="the corners (4, 3) of a panel")
+    Q = finite_array(Q, "Q", shape=(4, 3), allowed="the corners (4, 3) of a panel")
     best, choice = -np.inf, (0, 1.0)
     for kind, fn in enumerate(_candidates()):
         if not _well_posed(kind, P, Q):

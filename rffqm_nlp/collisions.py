@@ -85,13 +85,16 @@ Method.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .files import Key, check_value
+from .backend import check_argument, describe_argument, finite_array, finite_result
+from .errors import InputError
+from .files import Key
 from .numpy_model import fold
-from .pattern import Pattern, check_omega
+from .pattern import Pattern, check_fold_angle, check_pattern
 
 #: Largest coarse step in omega.
 MAX_STEP = 0.1
@@ -170,11 +173,16 @@ def collisions(pattern: Pattern, omega_max: float, *, clearance: float = 0.0,
 
     ``omega_max`` in [-pi, pi] (negative: the other folding branch); ``clearance`` >= 0 a
     distance (a sheet thickness) that panels sharing no vertex must keep; ``tol`` > 0 the
-    accuracy of ``first_omega`` in omega. See the module docstring for the method.
+    accuracy of ``first_omega`` in omega. See the module docstring for the method. Raises
+    :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds (``pattern`` not a
+    :class:`~rffqm_nlp.pattern.Pattern`, ``omega_max`` not one number in [-pi, pi], ...).
     """
-    w_max = float(check_omega(omega_max, "omega_max"))
-    clearance = check_value(clearance, Key("number", low=0, hint="(a distance)"), "clearance")
-    tol = check_value(tol, Key("number", low=0, low_open=True, hint="(a step in omega)"), "tol")
+    check_pattern(pattern, "pattern")
+    w_max = check_fold_angle(omega_max, "omega_max")
+    clearance = check_argument(clearance, Key("number", low=0, hint="(a distance)"),
+                               "clearance")
+    tol = check_argument(tol, Key("number", low=0, low_open=True, hint="(a step in omega)"),
+                         "tol")
     geo = _Geometry(pattern)
     flat = _flat_overlaps(geo)
     first, pairs = _first_contact(geo, w_max, float(clearance), float(tol))
@@ -417,7 +425,37 @@ def _shift(A: np.ndarray, B: np.ndarray, at: int) -> np.ndarray:
 def panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
                    q: np.ndarray) -> np.ndarray:
     """Distances (n,) between panels p and q (n,) in states S[s] (S: (K, V, 3)), 0 on
-    contact."""
+    contact. ``geo`` is the pattern (or the panel bookkeeping :func:`collisions` made of
+    it), S holds states of its V vertices; every argument is checked
+    (:class:`~rffqm_nlp.errors.InputError`)."""
+    if isinstance(geo, Pattern):
+        geo = _Geometry(geo)
+    if not isinstance(geo, _Geometry):
+        raise InputError(f"geo must be the crease pattern (rffqm_nlp.Pattern) of the "
+                         f"states, got {describe_argument(geo)}")
+    V, P = (geo.N + 1) * (geo.M + 1), geo.N * geo.M
+    S = finite_array(S, "S", shape=(None, V, 3), allowed=f"states (K, {V}, 3) of finite "
+                     "numbers")
+    s, p, q = (_indices(x, name, high) for x, name, high in
+               ((s, "s", len(S)), (p, "p", P), (q, "q", P)))
+    if not len(s) == len(p) == len(q):
+        raise InputError(f"s, p and q must have one length, got {len(s)}, {len(p)} and "
+                         f"{len(q)}")
+    return finite_result(_panel_distance(geo, S, s, p, q), "the panel distances are not "
+                         "finite (degenerate panels or coordinates too large)")
+
+
+def _indices(x: Any, name: str, high: int) -> np.ndarray:
+    """A 1-D array of whole numbers in [0, high)."""
+    arr = finite_array(x, name, ndim=1, allowed=f"a 1-D array of whole numbers in [0, {high})")
+    if np.any(arr != np.round(arr)) or np.any(arr < 0) or np.any(arr >= high):
+        raise InputError(f"{name} must be a 1-D array of whole numbers in [0, {high}), got "
+                         f"values from {arr.min():g} to {arr.max():g}")
+    return arr.astype(np.int64)
+
+
+def _panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
+                    q: np.ndarray) -> np.ndarray:
     return _quad_distance(S[s[:, None], geo.corners[p]], S[s[:, None], geo.corners[q]],
                           geo.scale)
 
@@ -428,7 +466,7 @@ def _quad_distance(P: np.ndarray, Q: np.ndarray, scale: float) -> np.ndarray:
     TP = P[:, _TRIANGLES][:, _TRI_PAIRS[:, 0]]                      # (n, 4, 3, 3)
     TQ = Q[:, _TRIANGLES][:, _TRI_PAIRS[:, 1]]
     TP, TQ = TP.reshape(-1, 3, 3), TQ.reshape(-1, 3, 3)
-    d = np.concatenate([triangle_distance(TP[k:k + CHUNK], TQ[k:k + CHUNK], scale)
+    d = np.concatenate([_triangle_distance(TP[k:k + CHUNK], TQ[k:k + CHUNK], scale)
                         for k in range(0, len(TP), CHUNK)] or [np.zeros(0)])
     return _least(d.reshape(-1, 4))
 
@@ -440,12 +478,30 @@ def _centroid(Q: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- triangles
 
+def _triangles(A: Any, B: Any, scale: Any) -> tuple[np.ndarray, np.ndarray, float]:
+    """The arguments of :func:`triangles_intersect` and :func:`triangle_distance` checked:
+    triangles (n, 3, 3) of finite numbers, as many of each, and a scale > 0."""
+    A = finite_array(A, "A", shape=(None, 3, 3), allowed="triangles (n, 3, 3) of finite "
+                     "numbers")
+    B = finite_array(B, "B", shape=(len(A), 3, 3), allowed=f"triangles ({len(A)}, 3, 3) of "
+                     "finite numbers, as many as A")
+    scale = check_argument(scale, Key("number", low=0.0, low_open=True, hint="(a length)"),
+                           "scale")
+    return A, B, scale
+
+
 def triangles_intersect(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Whether closed triangles A and B (n, 3, 3) intersect, (n,) bool (separating axes).
 
     Tested axes (17): both normals, the nine edge-edge cross products and the in-plane
     normals of all six edges; gaps below REL_EPS * scale * |axis| count as touching.
+    Raises :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds or shapes.
     """
+    with np.errstate(all="ignore"):
+        return _triangles_intersect(*_triangles(A, B, scale))
+
+
+def _triangles_intersect(A: np.ndarray, B: np.ndarray, scale: float) -> np.ndarray:
     eA = np.roll(A, -1, axis=1) - A
     eB = np.roll(B, -1, axis=1) - B
     nA = _cross(eA[:, 0], eA[:, 1])
@@ -471,7 +527,19 @@ def _separated(axes: np.ndarray, A: np.ndarray, B: np.ndarray, scale: float) -> 
 
 
 def triangle_distance(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """Euclidean distances (n,) between closed triangles A and B (n, 3, 3), 0 if they meet."""
+    """Euclidean distances (n,) between closed triangles A and B (n, 3, 3), 0 if they meet.
+
+    Raises :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds or shapes, and
+    for degenerate triangles (corners on a line) or coordinates too large for floating
+    point, where the distances computed here are not finite."""
+    A, B, scale = _triangles(A, B, scale)
+    with np.errstate(all="ignore"):
+        d = _triangle_distance(A, B, scale)
+    return finite_result(d, "triangle_distance has no finite value: a triangle is degenerate "
+                            "(its corners on a line) or its coordinates are too large")
+
+
+def _triangle_distance(A: np.ndarray, B: np.ndarray, scale: float) -> np.ndarray:
     if len(A) == 0:
         return np.zeros(0)
     eA = np.roll(A, -1, axis=1)
@@ -480,7 +548,7 @@ def triangle_distance(A: np.ndarray, B: np.ndarray, scale: float = 1.0) -> np.nd
     d = _least(seg.reshape(-1, 9))
     d = np.minimum(d, _least(_vertex_face_distance(A, B)))
     d = np.minimum(d, _least(_vertex_face_distance(B, A)))
-    return np.where(triangles_intersect(A, B, scale), 0.0, d)
+    return np.where(_triangles_intersect(A, B, scale), 0.0, d)
 
 
 def _segment_distance(P1, Q1, P2, Q2) -> np.ndarray:
@@ -914,9 +982,15 @@ def near_pairs(pattern: Pattern, Y: np.ndarray, reach: float) -> tuple[np.ndarra
     """Pairs of panels that share no vertex within ``reach`` in one state, for
     :mod:`rffqm_nlp.clearance`: the pairs (n, 2) (0-based panel indices p = (i-1) M +
     (j-1), p < q) whose bounding spheres in the folded vertices Y ((N+1, M+1, 3)) come
-    within ``reach`` (the broad phase), and their exact distances (n,)."""
+    within ``reach`` (the broad phase), and their exact distances (n,). Raises
+    :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds or shapes."""
+    check_pattern(pattern, "pattern")
+    Y = finite_array(Y, "Y", shape=(pattern.N + 1, pattern.M + 1, 3))
+    reach = check_argument(reach, Key("number", low=0.0, hint="(a distance)"), "reach")
     geo = _Geometry(pattern)
-    S = np.asarray(Y, dtype=float).reshape(1, -1, 3)
+    S = Y.reshape(1, -1, 3)
     pq = _near_pairs(geo, geo.centres(S)[0], float(reach))
     s = np.zeros(len(pq), dtype=np.int64)
-    return pq, panel_distance(geo, S, s, pq[:, 0], pq[:, 1])
+    return pq, finite_result(_panel_distance(geo, S, s, pq[:, 0], pq[:, 1]),
+                             "the panel distances are not finite (degenerate panels or "
+                             "coordinates too large)")

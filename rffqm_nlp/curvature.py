@@ -17,8 +17,9 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import shape
+from .backend import finite_array, finite_result
 from .errors import InputError
-from .surfaces import Surface
+from .surfaces import Surface, check_surface
 
 
 @dataclass(frozen=True)
@@ -58,24 +59,38 @@ def lattice_curvatures(P: np.ndarray, orient: np.ndarray | None = None
     """(K, H) of the lattice P (n, m, 3) at its interior points, each (n-2, m-2).
 
     ``orient``: unit normals (n-2, m-2, 3) that H's normal is turned to agree with (default:
-    the lattice's own r_u x r_v)."""
-    P = np.asarray(P, dtype=float)
-    E, F, G, L, M, N = shape.fundamental_forms(P)
-    det = E * G - F ** 2
-    K = (L * N - M ** 2) / det
-    H = (E * N - 2 * F * M + G * L) / (2 * det)
+    the lattice's own r_u x r_v). Raises :class:`InputError` for arguments that are not
+    finite numbers of these shapes (n, m >= 3) and for a degenerate lattice (no finite
+    curvature)."""
+    P = finite_array(P, "P", shape=(None, None, 3))
+    if min(P.shape[:2]) < 3:
+        raise InputError(f"P must be a lattice of at least 3 x 3 points, got shape {P.shape}")
     if orient is not None:
-        H = H * np.where(np.sum(_normals(P) * orient, axis=-1) < 0, -1.0, 1.0)
-    return K, H
+        orient = finite_array(orient, "orient", shape=(P.shape[0] - 2, P.shape[1] - 2, 3))
+    E, F, G, L, M, N = shape.fundamental_forms(P)
+    with np.errstate(all="ignore"):
+        det = E * G - F ** 2
+        K = (L * N - M ** 2) / det
+        H = (E * N - 2 * F * M + G * L) / (2 * det)
+        if orient is not None:
+            H = H * np.where(np.sum(_normals(P) * orient, axis=-1) < 0, -1.0, 1.0)
+    return finite_result((K, H), "the lattice has no finite curvature: it is degenerate "
+                                 "(E G - F^2 = 0 at an interior point) or too large for "
+                                 "floating point")
 
 
 def curvature_maps(coarse: np.ndarray, target_points: np.ndarray,
                    target: Surface) -> Curvature:
     """The :class:`Curvature` of an aligned coarse lattice (N+1, M+1, 3) against the target
     lattice (N+1, M+1, 3), which is ``target``'s :meth:`~rffqm_nlp.surfaces.Surface.lattice`
-    (uniform in parameters over the whole domain)."""
-    coarse, T = np.asarray(coarse, dtype=float), np.asarray(target_points, dtype=float)
-    if coarse.shape != T.shape or coarse.ndim != 3 or min(T.shape[:2]) < 3:
+    (uniform in parameters over the whole domain). Raises :class:`InputError` for
+    arguments of other kinds or shapes and for degenerate lattices (no finite curvature)."""
+    check_surface(target, "target")
+    coarse = finite_array(coarse, "coarse", ndim=3, allowed="an (n, m, 3) lattice of finite "
+                          "numbers")
+    T = finite_array(target_points, "target_points", ndim=3, allowed="an (n, m, 3) lattice "
+                     "of finite numbers")
+    if coarse.shape != T.shape or T.shape[2] != 3 or min(T.shape[:2]) < 3:
         raise InputError("curvature maps need a coarse lattice and a target lattice of one "
                          f"shape (n, m, 3) with n, m >= 3, got {coarse.shape} and {T.shape}")
     target_K, target_H = lattice_curvatures(T)

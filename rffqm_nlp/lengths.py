@@ -46,9 +46,10 @@ import numpy as np
 from scipy.optimize import linprog
 
 from . import memory
-from .boundary import BoundaryData
+from .backend import check_argument, finite_array
+from .boundary import BoundaryData, check_boundary, check_size
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
-from .files import Key, check_value
+from .files import Key
 from .ipopt_options import NO_OPTION_FILE
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
@@ -59,6 +60,7 @@ OBJECTIVES: tuple[str, ...] = ("max_min", "uniform")
 DEFAULT_MIN_LENGTH = 1e-3
 _MIN_LENGTH = Key("number", low=0, high=1, low_open=True, high_open=True,
                   hint="(a fraction of the mean side; 1 would force all sides equal)")
+_PROGRAM = Key("choice", choices=("lp", "nlp"))
 
 
 # --------------------------------------------------------------------------- linear maps
@@ -71,6 +73,17 @@ class LengthMaps:
 
     Lh: np.ndarray
     Lv: np.ndarray
+
+    def __post_init__(self) -> None:
+        Lh = finite_array(self.Lh, "Lh", ndim=3, allowed="an (N+1, M, N+M) array of finite "
+                          "numbers with N, M >= 1")
+        n1, M, n = Lh.shape
+        if n1 < 2 or M < 1 or n != n1 - 1 + M:
+            raise InputError(f"Lh must be an (N+1, M, N+M) array of finite numbers with N, "
+                             f"M >= 1, got shape {Lh.shape}")
+        Lv = finite_array(self.Lv, "Lv", shape=(n1 - 1, M + 1, n))
+        object.__setattr__(self, "Lh", Lh)
+        object.__setattr__(self, "Lv", Lv)
 
     @property
     def interior(self) -> np.ndarray:
@@ -92,8 +105,9 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
 
     The angles are marched once; the sides then follow eq:getSides with coefficient vectors
     in place of numbers. Raises :class:`MarchingError` if the angles fail the first or the
-    second check.
+    second check; :class:`InputError` when ``bd`` is not :class:`BoundaryData`.
     """
+    check_boundary(bd)
     N, M = bd.N, bd.M
     alpha, beta, _, _, _, mu, alpha_d, _, _ = evaluate(pattern_function(N, M),
                                                        boundary_inputs(bd))
@@ -126,6 +140,8 @@ MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
 def memory_estimate(N: int, M: int, program: str) -> float:
     """Bytes that a side-length ``program`` ("lp": HiGHS' LPs, "nlp": IPOPT's "uniform"
     NLP) needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
+    N, M = check_size(N, M)
+    program = check_argument(program, _PROGRAM, "program")
     return memory.BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
 
 
@@ -133,6 +149,9 @@ def check_memory(bd: BoundaryData, program: str, name: str) -> None:
     """Refuse, before any work, side lengths of ``bd``'s pattern that this machine cannot
     hold with ``program`` (:func:`memory_estimate`): one :class:`InputError` line naming
     the function ``name``."""
+    check_boundary(bd)
+    program = check_argument(program, _PROGRAM, "program")
+    name = check_argument(name, Key("string"), "name")
     memory.refuse_beyond(memory_estimate(bd.N, bd.M, program),
                          f"{name} on {bd.N} x {bd.M} panels",
                          "choose fewer panels or keep the given side lengths")
@@ -147,10 +166,15 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
     ``delta`` (default: the smaller of eps and half the admissible shift) keeping every side
     positive. Raises :class:`InfeasibleDesign` when no positive lengths exist for these
     angles, :class:`MarchingError` when the angles themselves fail, :class:`InputError`
-    when this machine cannot hold the LP (:func:`check_memory`).
+    when this machine cannot hold the LP (:func:`check_memory`) and for arguments of the
+    wrong kind (``bd`` not BoundaryData, ``eps`` not a finite number > 0, ``delta`` neither
+    None nor a finite number in the admissible range).
     """
-    if not (np.isfinite(eps) and eps > 0):
-        raise InputError(f"eps must be a finite positive length, got {eps!r}")
+    check_boundary(bd)
+    eps = check_argument(eps, Key("number", low=0.0, low_open=True, hint="(a length)"), "eps")
+    if delta is not None:
+        delta = check_argument(delta, Key("number", low=0.0, low_open=True,
+                                          hint="(a length, or None)"), "delta")
     check_memory(bd, "lp", "side_length_lp")
     A = length_maps(bd).interior
     n = A.shape[1]
@@ -169,8 +193,12 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
         delta = min(eps, 0.5 * max_delta)
     elif not (0 < delta < max_delta):
         raise InputError(f"delta must lie in (0, {max_delta:.6g}) to keep every side positive, "
-                         f"got {delta!r}")
-    return bd.with_lengths(ell + delta)
+                         f"got {delta:g}")
+    lengths = ell + delta
+    if not np.all(np.isfinite(lengths)):
+        raise InfeasibleDesign(f"the side-length LP's lengths overflow for eps = {eps:g}; "
+                               "choose a smaller eps")
+    return bd.with_lengths(lengths)
 
 
 # --------------------------------------------------------------------------- the NLP
@@ -208,13 +236,13 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
     :class:`InputError` on invalid arguments or a program this machine cannot hold
     (:func:`check_memory`).
     """
-    if not isinstance(bd, BoundaryData):
-        raise InputError(f"side_length_nlp expects BoundaryData, got {type(bd).__name__}")
-    objective = check_value(objective, Key("choice", choices=OBJECTIVES), "objective")
-    min_length = check_value(DEFAULT_MIN_LENGTH if min_length is None else min_length,
-                             _MIN_LENGTH, "min_length")
-    tol = check_value(tol, Key("number", low=0, low_open=True), "tol")
-    max_iter = check_value(max_iter, Key("whole", low=1), "max_iter")
+    check_boundary(bd)
+    objective = check_argument(objective, Key("choice", choices=OBJECTIVES), "objective")
+    min_length = check_argument(DEFAULT_MIN_LENGTH if min_length is None else min_length,
+                                _MIN_LENGTH, "min_length")
+    tol = check_argument(tol, Key("number", low=0, low_open=True), "tol")
+    max_iter = check_argument(max_iter, Key("whole", low=1, high=2**31 - 1), "max_iter")
+    verbose = check_argument(verbose, Key("bool"), "verbose")
     check_memory(bd, "lp" if objective == "max_min" else "nlp", "side_length_nlp")
     A = length_maps(bd).all_sides
     mean_row = A.mean(axis=0)
@@ -327,8 +355,14 @@ def _uniform(A: np.ndarray, mean_row: np.ndarray, min_length: float, ell0: np.nd
 # --------------------------------------------------------------------------- summary
 def length_spread(lh: np.ndarray, lv: np.ndarray) -> dict[str, float]:
     """Summary of a pattern's side lengths lh (N+1, M) and lv (N, M+1): smallest/mean,
-    largest/mean, max/min."""
-    sides = np.concatenate([np.ravel(lh), np.ravel(lv)])
+    largest/mean, max/min. The sides are finite positive numbers (at least one of them);
+    anything else raises :class:`InputError`."""
+    sides = np.concatenate([np.ravel(finite_array(lh, "lh")), np.ravel(finite_array(lv, "lv"))])
+    if sides.size == 0 or sides.min() <= 0 or not np.isfinite(sides.sum()):
+        raise InputError("length_spread needs at least one side, every side a finite positive "
+                         "length (their sum finite), got "
+                         + (f"{sides.size} sides, the smallest {sides.min():g}" if sides.size
+                            else "no sides"))
     mean = sides.mean()
     return {"min_over_mean": float(sides.min() / mean), "max_over_mean": float(sides.max() / mean),
             "max_over_min": float(sides.max() / sides.min())}

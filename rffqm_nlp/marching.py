@@ -13,15 +13,19 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from . import vertex as vx
-from .backend import Scalar
-from .boundary import BoundaryData
+from .backend import (Scalar, check_argument, describe_argument, finite_array, finite_result,
+                      is_casadi)
+from .boundary import BoundaryData, check_boundary, check_size
 from .errors import InputError, MarchingError
-from .pattern import Pattern, check_omega
+from .files import Key
+from .pattern import (Pattern, check_fold_angle, check_fold_memory, check_folded,
+                      check_march_memory, check_omega, check_pattern)
 
 #: A quaternion's 4 components (w, x, y, z), each a CasADi matrix (or a number).
 Quaternion = Sequence[Scalar]
@@ -70,15 +74,19 @@ def _row_step(M: int) -> ca.Function:
                         ys[1, :], ys[2, :]])
 
 
-@lru_cache(maxsize=None)
 def pattern_function(N: int, M: int) -> ca.Function:
-    """Boundary data -> crease pattern, as one CasADi Function.
+    """Boundary data -> crease pattern, as one CasADi Function (built once per size).
 
     Inputs: ``left`` (3 x N+1), ``bottom`` (3 x M) (rows alpha, beta, sigma), ``l_left``
     (1 x N), ``l_bottom`` (1 x M). Outputs: ``alpha, beta, sigma`` (N+1 x M+1), ``lh``
     (N+1 x M), ``lv`` (N x M+1), ``mu`` and ``alpha_d`` (N x M), flat positions ``Xx, Xy``
-    (N+1 x M+1).
+    (N+1 x M+1). N and M are whole numbers in [1, MAX_SIDE] (:func:`check_size`).
     """
+    return _pattern_function(*check_size(N, M))
+
+
+@lru_cache(maxsize=None)
+def _pattern_function(N: int, M: int) -> ca.Function:
     left = ca.MX.sym("left", 3, N + 1)
     bottom = ca.MX.sym("bottom", 3, M)
     l_left = ca.MX.sym("l_left", 1, N)
@@ -102,12 +110,81 @@ def pattern_function(N: int, M: int) -> ca.Function:
         ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "Xx", "Xy"])
 
 
+def _matrices(what: str, **args: Any) -> tuple[list, bool]:
+    """The arguments of the graph builder ``what``, each a CasADi matrix or finite real
+    numbers (a 2-D array becomes a DM, a 1-D one a column, a number a float), and whether
+    all were numeric (the result is then a number to check). :class:`InputError` names an
+    argument of another kind."""
+    numeric = not is_casadi(*args.values())
+    out = []
+    for name, value in args.items():
+        if is_casadi(value):
+            out.append(value)
+            continue
+        arr = finite_array(value, name, allowed="a CasADi matrix or finite real numbers "
+                           "(a number or an array of at most 2 dimensions)")
+        if arr.ndim > 2:
+            raise InputError(f"{what}: {name} must be a matrix (at most 2 dimensions), got "
+                             f"shape {arr.shape}")
+        out.append(ca.DM(arr) if arr.ndim else float(arr))
+    return out, numeric
+
+
+def _shape(x: Any) -> tuple[int, int]:
+    """The (rows, columns) of a CasADi matrix or a float (1, 1)."""
+    return tuple(x.shape) if is_casadi(x) else (1, 1)
+
+
+def _same_shape(what: str, names: str, values: list, least: tuple[int, int] = (1, 1)) -> tuple:
+    """The common (rows, columns) of ``values`` (``names``, comma-separated), at least
+    ``least``; :class:`InputError` otherwise."""
+    shapes = [_shape(v) for v in values]
+    if len(set(shapes)) != 1 or shapes[0][0] < least[0] or shapes[0][1] < least[1]:
+        raise InputError(f"{what}: {names} must be matrices of one shape of at least "
+                         f"{least[0]} x {least[1]}, got shapes {', '.join(map(str, shapes))}")
+    return shapes[0]
+
+
+def _numeric_result(value: Any, what: str) -> Any:
+    """A result computed from numbers (CasADi DMs), unless an entry is NaN or infinite."""
+    parts = value if isinstance(value, (tuple, list)) else [value]
+    finite_result(tuple(ca.DM(p).full() for p in _flat(parts)), what)
+    return value
+
+
+def _flat(parts) -> list:
+    out = []
+    for p in parts:
+        out.extend(_flat(p) if isinstance(p, (tuple, list)) else [p])
+    return out
+
+
+def _quaternion(q: Any, name: str, what: str) -> list:
+    """A quaternion argument: a sequence of 4 components (w, x, y, z), or a CasADi vector
+    of 4 entries."""
+    if is_casadi(q) and q.numel() == 4:
+        return [q[i] for i in range(4)]
+    if isinstance(q, (str, bytes)) or not isinstance(q, (tuple, list)) or len(q) != 4:
+        raise InputError(f"{what}: {name} must be a quaternion, a sequence of 4 components "
+                         f"(w, x, y, z), got {describe_argument(q)}")
+    return list(q)
+
+
 def edge_directions(alpha: ca.MX, beta: ca.MX) -> ca.MX:
     """Directions of the horizontal edges (N+1 x M+1; the last column is auxiliary).
 
     Accumulated sector angles (docs/paper.md s.4): along the left column the direction turns by
-    alpha(i, 1) - beta(i+1, 1), along a row by pi - alpha - beta of each vertex.
+    alpha(i, 1) - beta(i+1, 1), along a row by pi - alpha - beta of each vertex. ``alpha``,
+    ``beta``: CasADi matrices or finite numbers of one shape (numbers give a DM).
     """
+    (alpha, beta), numeric = _matrices("edge_directions", alpha=alpha, beta=beta)
+    _same_shape("edge_directions", "alpha, beta", [alpha, beta])
+    alpha, beta = ca.MX(alpha) if numeric else alpha, ca.MX(beta) if numeric else beta
+    out = _edge_directions(alpha, beta)
+    return ca.evalf(out) if numeric else out
+
+
+def _edge_directions(alpha, beta):
     first_col = ca.vertcat(0, ca.cumsum(alpha[:-1, 0] - beta[1:, 0], 0))
     turn = PI - alpha[:, 1:] - beta[:, 1:]
     return ca.repmat(first_col, 1, alpha.shape[1]) + ca.horzcat(
@@ -116,7 +193,7 @@ def edge_directions(alpha: ca.MX, beta: ca.MX) -> ca.MX:
 
 def _flat_positions(alpha, beta, lh, lv):
     """Flat vertex positions as cumulative sums of edge vectors (stable, docs/paper.md s.4)."""
-    theta_h = edge_directions(alpha, beta)
+    theta_h = _edge_directions(alpha, beta)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
     bottom_x = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.cos(theta_h[0, :-1]), 1))
     bottom_y = ca.horzcat(0, ca.cumsum(lh[0, :] * ca.sin(theta_h[0, :-1]), 1))
@@ -139,8 +216,21 @@ def fold_multipliers(alpha: ca.MX, beta: ca.MX, sigma: ca.MX) -> tuple[ca.MX, ca
 
     kh[i, j] belongs to gamma1 of vertex (i+1, j+1) (the horizontal edge to its right),
     kv[i, j] to gamma2 (the vertical edge above it): eq:foldInitial, eq:foldMiddle and
-    eq:foldFinal with the half-angle forms of gamma2_bar and gamma1_bar.
+    eq:foldFinal with the half-angle forms of gamma2_bar and gamma1_bar. Numbers give DMs,
+    and :class:`InputError` where a vertex has no finite multiplier.
     """
+    (alpha, beta, sigma), numeric = _matrices("fold_multipliers", alpha=alpha, beta=beta,
+                                              sigma=sigma)
+    _same_shape("fold_multipliers", "alpha, beta, sigma", [alpha, beta, sigma])
+    if numeric:
+        alpha, beta, sigma = (ca.MX(x) for x in (alpha, beta, sigma))
+        return _numeric_result(tuple(ca.evalf(x) for x in _fold_multipliers(alpha, beta, sigma)),
+                               "fold_multipliers: a vertex has sigma outside MV(alpha, "
+                               "beta), where its multiplier is 0 or infinite")
+    return _fold_multipliers(alpha, beta, sigma)
+
+
+def _fold_multipliers(alpha, beta, sigma):
     m2 = vx.mu2(alpha, beta, sigma)
     kh0 = ca.horzcat(1, _sign_products(-sigma[0, 1:], 1))
     kv0 = -kh0 / m2[0, :]
@@ -157,16 +247,42 @@ def crease_quaternion(theta: Scalar, k: Scalar, c: Scalar, s: Scalar, sign: floa
 
     With the multiplier given as a ratio (``k_den``) the quaternion stays smooth where k_den
     passes 0 (gamma through pi); it is then sign(k_den) times the quaternion of k / k_den,
-    the same rotation.
+    the same rotation. Arguments: CasADi matrices or finite numbers of one shape (or
+    numbers); numbers give DMs.
     """
+    (theta, k, c, s, sign, k_den), numeric = _matrices(
+        "crease_quaternion", theta=theta, k=k, c=c, s=s, sign=sign, k_den=k_den)
+    _broadcast("crease_quaternion", dict(theta=theta, k=k, c=c, s=s, sign=sign, k_den=k_den))
+    out = _crease_quaternion(theta, k, c, s, sign, k_den)
+    if numeric:
+        out = tuple(ca.DM(q) for q in out)
+        return _numeric_result(out, "crease_quaternion: c k_den and k s vanish together, "
+                                    "where the rotation is undefined")
+    return out
+
+
+def _broadcast(what: str, args: dict) -> None:
+    """CasADi's elementwise broadcasting: every argument 1 x 1 or of one shape."""
+    shapes = {name: _shape(v) for name, v in args.items()}
+    big = {s for s in shapes.values() if s != (1, 1)}
+    if len(big) > 1:
+        raise InputError(f"{what}: the arguments must be numbers or matrices of one shape, "
+                         f"got shapes {', '.join(f'{n} {s}' for n, s in shapes.items())}")
+
+
+def _crease_quaternion(theta, k, c, s, sign=1.0, k_den=1.0):
     r = ca.sqrt(c * c * k_den * k_den + k * k * s * s)
     w, sh = c * k_den / r, sign * k * s / r
     return w, sh * ca.cos(theta), sh * ca.sin(theta), 0 * w
 
 
-@lru_cache(maxsize=None)
 def panel_quaternions_function(N: int, M: int) -> ca.Function:
     """Pattern and omega -> the 4 components (N x M) of every panel's rotation quaternion."""
+    return _panel_quaternions_function(*check_size(N, M))
+
+
+@lru_cache(maxsize=None)
+def _panel_quaternions_function(N: int, M: int) -> ca.Function:
     alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
     lh = ca.MX.sym("lh", N + 1, M)
     lv = ca.MX.sym("lv", N, M + 1)
@@ -176,7 +292,17 @@ def panel_quaternions_function(N: int, M: int) -> ca.Function:
 
 
 def qmul(p: Quaternion, q: Quaternion) -> Quaternion:
-    """Quaternion product p q, componentwise on (w, x, y, z) sequences of matrices."""
+    """Quaternion product p q, componentwise on (w, x, y, z) sequences of matrices (CasADi
+    matrices or finite numbers of one shape; numbers give DMs)."""
+    p, q = _quaternion(p, "p", "qmul"), _quaternion(q, "q", "qmul")
+    parts, numeric = _matrices("qmul", **{f"p[{i}]": x for i, x in enumerate(p)},
+                               **{f"q[{i}]": x for i, x in enumerate(q)})
+    _broadcast("qmul", {f"component {i}": x for i, x in enumerate(parts)})
+    out = _qmul(parts[:4], parts[4:])
+    return tuple(ca.DM(x) for x in out) if numeric else out
+
+
+def _qmul(p, q):
     pw, px, py, pz = p
     qw, qx, qy, qz = q
     return (pw * qw - px * qx - py * qy - pz * qz,
@@ -189,7 +315,7 @@ def qmul(p: Quaternion, q: Quaternion) -> Quaternion:
 def _qmul_step(width: int) -> ca.Function:
     P = ca.MX.sym("P", 4, width)
     Q = ca.MX.sym("Q", 4, width)
-    prod = qmul([P[k, :] for k in range(4)], [Q[k, :] for k in range(4)])
+    prod = _qmul([P[k, :] for k in range(4)], [Q[k, :] for k in range(4)])
     return ca.Function("qmul", [P, Q], [ca.vertcat(*prod)])
 
 
@@ -202,20 +328,34 @@ def _cumulative_qprod(first, steps, count: int, width: int):
 
 
 def rotate_planar(q, vx_, vy_):
-    """Rotate in-plane vectors (vx, vy, 0) by unit quaternions q = (w, x, y, z), elementwise."""
+    """Rotate in-plane vectors (vx, vy, 0) by unit quaternions q = (w, x, y, z), elementwise
+    (CasADi matrices or finite numbers of one shape; numbers give DMs)."""
+    q = _quaternion(q, "q", "rotate_planar")
+    parts, numeric = _matrices("rotate_planar", **{f"q[{i}]": x for i, x in enumerate(q)},
+                               vx=vx_, vy=vy_)
+    _broadcast("rotate_planar", {f"argument {i}": x for i, x in enumerate(parts)})
+    out = _rotate_planar(parts[:4], parts[4], parts[5])
+    return tuple(ca.DM(x) for x in out) if numeric else out
+
+
+def _rotate_planar(q, vx_, vy_):
     w, x, y, z = q
     return ((1 - 2 * (y * y + z * z)) * vx_ + 2 * (x * y - w * z) * vy_,
             2 * (x * y + w * z) * vx_ + (1 - 2 * (x * x + z * z)) * vy_,
             2 * (x * z - w * y) * vx_ + 2 * (y * z + w * x) * vy_)
 
 
-@lru_cache(maxsize=None)
 def fold_function(N: int, M: int) -> ca.Function:
     """Pattern and omega -> folded vertices, as one CasADi Function.
 
     Inputs: ``alpha, beta, sigma`` (N+1 x M+1), ``lh`` (N+1 x M), ``lv`` (N x M+1),
     ``omega``. Outputs: ``Yx, Yy, Yz`` (N+1 x M+1) with R^{11} = I, y^{11} = x^{11} = 0.
     """
+    return _fold_function(*check_size(N, M))
+
+
+@lru_cache(maxsize=None)
+def _fold_function(N: int, M: int) -> ca.Function:
     alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
     lh = ca.MX.sym("lh", N + 1, M)
     lv = ca.MX.sym("lv", N, M + 1)
@@ -225,7 +365,6 @@ def fold_function(N: int, M: int) -> ca.Function:
                        ["alpha", "beta", "sigma", "lh", "lv", "omega"], ["Yx", "Yy", "Yz"])
 
 
-@lru_cache(maxsize=None)
 def folded_function(N: int, M: int) -> ca.Function:
     """Boundary data and omega -> folded vertices: :func:`pattern_function` then
     :func:`fold_function`, the differentiable map the inverse design optimises through.
@@ -233,7 +372,12 @@ def folded_function(N: int, M: int) -> ca.Function:
     Inputs: ``left, bottom, l_left, l_bottom`` as in :func:`pattern_function`, ``omega``.
     Outputs: ``Yx, Yy, Yz`` (N+1 x M+1).
     """
-    pattern = pattern_function(N, M)
+    return _folded_function(*check_size(N, M))
+
+
+@lru_cache(maxsize=None)
+def _folded_function(N: int, M: int) -> ca.Function:
+    pattern = _pattern_function(N, M)
     inputs = pattern.mx_in()
     alpha, beta, sigma, lh, lv, *_ = pattern.call(inputs)
     omega = ca.MX.sym("omega")
@@ -242,7 +386,6 @@ def folded_function(N: int, M: int) -> ca.Function:
                        [*pattern.name_in(), "omega"], ["Yx", "Yy", "Yz"])
 
 
-@lru_cache(maxsize=None)
 def marched_function(N: int, M: int) -> ca.Function:
     """Boundary data and omega -> the crease pattern and its folded state, as one CasADi
     Function: :func:`pattern_function`, then the kinematics of :func:`fold_function` and
@@ -254,14 +397,19 @@ def marched_function(N: int, M: int) -> ca.Function:
     ``theta_h`` (:func:`edge_directions`, N+1 x M+1), the panel quaternions ``Qw, Qx, Qy,
     Qz`` (N x M) and the folded vertices ``Yx, Yy, Yz`` (N+1 x M+1).
     """
-    pattern = pattern_function(N, M)
+    return _marched_function(*check_size(N, M))
+
+
+@lru_cache(maxsize=None)
+def _marched_function(N: int, M: int) -> ca.Function:
+    pattern = _pattern_function(N, M)
     inputs = pattern.mx_in()
     alpha, beta, sigma, lh, lv, mu, alpha_d, _, _ = pattern.call(inputs)
     omega = ca.MX.sym("omega")
     Y, quat = _fold_expr(alpha, beta, sigma, lh, lv, omega)
     return ca.Function(
         "marched", [*inputs, omega],
-        [alpha, beta, sigma, lh, lv, mu, alpha_d, edge_directions(alpha, beta), *quat, *Y],
+        [alpha, beta, sigma, lh, lv, mu, alpha_d, _edge_directions(alpha, beta), *quat, *Y],
         [*pattern.name_in(), "omega"],
         ["alpha", "beta", "sigma", "lh", "lv", "mu", "alpha_d", "theta_h",
          "Qw", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"])
@@ -273,14 +421,33 @@ def crease_quaternions(alpha: ca.MX, beta: ca.MX, sigma: ca.MX, theta_h: ca.MX,
 
     Returns (qv, qh): qv for the vertical creases of the bottom row, R_{t2}(-gamma2^{1j}),
     j = 2..M (4 components, 1 x M-1), and qh for the horizontal creases R_{t1}(gamma1^{ij}),
-    i = 2..N, j = 1..M (4 components, N-1 x M).
+    i = 2..N, j = 1..M (4 components, N-1 x M). The matrices are (N+1 x M+1), N, M >= 1,
+    ``omega`` a number or 1 x 1; numbers give DMs.
     """
+    (alpha, beta, sigma, theta_h, omega), numeric = _matrices(
+        "crease_quaternions", alpha=alpha, beta=beta, sigma=sigma, theta_h=theta_h,
+        omega=omega)
+    _same_shape("crease_quaternions", "alpha, beta, sigma, theta_h",
+                [alpha, beta, sigma, theta_h], least=(2, 2))
+    if _shape(omega) != (1, 1):
+        raise InputError(f"crease_quaternions: omega must be a number, got shape "
+                         f"{_shape(omega)}")
+    if numeric:
+        alpha, beta, sigma, theta_h = (ca.MX(x) for x in (alpha, beta, sigma, theta_h))
+        qv, qh = _crease_quaternions(alpha, beta, sigma, theta_h, omega)
+        out = (tuple(ca.evalf(x) for x in qv), tuple(ca.evalf(x) for x in qh))
+        return _numeric_result(out, "crease_quaternions: a vertex has sigma outside "
+                                    "MV(alpha, beta), where its multiplier is 0 or infinite")
+    return _crease_quaternions(alpha, beta, sigma, theta_h, omega)
+
+
+def _crease_quaternions(alpha, beta, sigma, theta_h, omega):
     N, M = alpha.shape[0] - 1, alpha.shape[1] - 1
     c, s = ca.cos(omega / 2), ca.sin(omega / 2)
-    kh, kv = fold_multipliers(alpha, beta, sigma)
+    kh, kv = _fold_multipliers(alpha, beta, sigma)
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
-    qv = crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
-    qh = crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
+    qv = _crease_quaternion(theta_v[0, 1:M], kv[0, 1:M], c, s, sign=-1.0)
+    qh = _crease_quaternion(theta_h[1:N, :M], kh[1:N, :M], c, s)
     return qv, qh
 
 
@@ -290,27 +457,45 @@ def rotated_edges(quat: Quaternion, alpha: ca.MX, theta_h: ca.MX, lh: ca.MX,
     the panel on their right (the last column by the panel on its left).
 
     ``quat`` are the 4 components (N x M) of the panel rotations. Returns (bottom, vertical)
-    as 3 components each, 1 x M and N x M+1.
+    as 3 components each, 1 x M and N x M+1. Numbers give DMs.
     """
+    quat = _quaternion(quat, "quat", "rotated_edges")
+    parts, numeric = _matrices("rotated_edges", **{f"quat[{i}]": q for i, q in enumerate(quat)},
+                               alpha=alpha, theta_h=theta_h, lh=lh, lv=lv)
+    N, M = _same_shape("rotated_edges", "quat's components", parts[:4])
+    for name, value, want in (("alpha", parts[4], (N + 1, M + 1)),
+                              ("theta_h", parts[5], (N + 1, M + 1)),
+                              ("lh", parts[6], (N + 1, M)), ("lv", parts[7], (N, M + 1))):
+        if _shape(value) != want:
+            raise InputError(f"rotated_edges: {name} must be {want[0]} x {want[1]} for quat's "
+                             f"{N} x {M} panels, got {_shape(value)}")
+    out = _rotated_edges(parts[:4], *parts[4:])
+    if numeric:
+        return _numeric_result(tuple(tuple(ca.DM(x) for x in part) for part in out),
+                               "rotated_edges: the rotated edges are not finite")
+    return out
+
+
+def _rotated_edges(quat, alpha, theta_h, lh, lv):
     M = lh.shape[1]
     theta_v = theta_h[:-1, :] + alpha[:-1, :]
-    bottom = rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
-                            lh[0, :] * ca.sin(theta_h[0, :M]))
+    bottom = _rotate_planar([comp[0, :] for comp in quat], lh[0, :] * ca.cos(theta_h[0, :M]),
+                             lh[0, :] * ca.sin(theta_h[0, :M]))
     quat_v = [ca.horzcat(comp, comp[:, M - 1]) for comp in quat]
-    vertical = rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
+    vertical = _rotate_planar(quat_v, lv * ca.cos(theta_v), lv * ca.sin(theta_v))
     return bottom, vertical
 
 
 def _fold_expr(alpha, beta, sigma, lh, lv, omega):
     N, M = lv.shape[0], lh.shape[1]
-    theta_h = edge_directions(alpha, beta)
-    qv, qh = crease_quaternions(alpha, beta, sigma, theta_h, omega)
+    theta_h = _edge_directions(alpha, beta)
+    qv, qh = _crease_quaternions(alpha, beta, sigma, theta_h, omega)
     # R^{1j} = R^{1(j-1)} R_{t2}(-gamma2^{1j}); R^{ij} = R^{(i-1)j} R_{t1}(gamma1^{ij}).
     q_row1 = _cumulative_qprod(ca.DM([1, 0, 0, 0]), ca.vertcat(*qv), M - 1, 1)
     steps = ca.vertcat(*(ca.reshape(comp.T, 1, M * (N - 1)) for comp in qh))
     Q = _cumulative_qprod(q_row1, steps, N - 1, M)
     quat = [ca.reshape(Q[k, :], M, N).T for k in range(4)]  # (N x M) per component
-    bottom, vertical = rotated_edges(quat, alpha, theta_h, lh, lv)
+    bottom, vertical = _rotated_edges(quat, alpha, theta_h, lh, lv)
     out = []
     for b, v in zip(bottom, vertical):
         row1 = ca.horzcat(0, ca.cumsum(b, 1))
@@ -321,6 +506,7 @@ def _fold_expr(alpha, beta, sigma, lh, lv, omega):
 # --------------------------------------------------------------------------- evaluation
 def boundary_inputs(bd: BoundaryData) -> list[np.ndarray]:
     """The inputs of :func:`pattern_function` for boundary data ``bd``."""
+    check_boundary(bd)
     return [bd.left.T, bd.bottom.T, bd.l_left[None, :], bd.l_bottom[None, :]]
 
 
@@ -329,8 +515,76 @@ def locate_failure(alpha_d: np.ndarray, mu: np.ndarray, lh: np.ndarray,
     """The first failing check in marching order, or None when the pattern is valid.
 
     Panels are visited row-major; a panel's inputs all come from earlier panels, so the
-    first flagged panel is a genuine failure. NaN counts as a failure.
+    first flagged panel is a genuine failure. NaN counts as a failure. ``alpha_d`` and
+    ``mu`` are (N, M), ``lh`` (N+1, M), ``lv`` (N, M+1) arrays of numbers (NaN allowed).
     """
+    alpha_d = finite_array(alpha_d, "alpha_d", ndim=2, finite=False,
+                           allowed="an (N, M) array of numbers")
+    N, M = alpha_d.shape
+    mu = finite_array(mu, "mu", shape=(N, M), finite=False,
+                      allowed=f"an ({N}, {M}) array of numbers like alpha_d")
+    lh = finite_array(lh, "lh", shape=(N + 1, M), finite=False,
+                      allowed=f"an ({N + 1}, {M}) array of numbers (N+1, M)")
+    lv = finite_array(lv, "lv", shape=(N, M + 1), finite=False,
+                      allowed=f"an ({N}, {M + 1}) array of numbers (N, M+1)")
+    if N < 1 or M < 1:
+        raise InputError(f"alpha_d must have at least one panel, got shape {(N, M)}")
+    return _locate_failure(alpha_d, mu, lh, lv)
+
+
+def march(bd: BoundaryData) -> Pattern:
+    """March the crease pattern of ``bd`` with the CasADi graph.
+
+    Raises :class:`MarchingError` naming the check and the first failing panel;
+    :class:`InputError` when ``bd`` is not :class:`BoundaryData`, when the march needs more
+    memory than this machine has left, and when the flat positions overflow (sides near
+    the largest float).
+    """
+    check_boundary(bd)
+    check_march_memory(bd.N, bd.M)
+    out = Evaluation._made(_pattern_function(bd.N, bd.M), boundary_inputs(bd)).run()
+    alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = out
+    failure = _locate_failure(alpha_d, mu, lh, lv)
+    if failure is not None:
+        check, (i, j) = failure
+        detail = (f"alpha_d = {alpha_d[i - 1, j - 1]:.6g}, mu_abc = {mu[i - 1, j - 1]:.6g}, "
+                  f"l_cd = {lv[i - 1, j]:.6g}, l_bd = {lh[i, j - 1]:.6g}")
+        raise MarchingError(check, (i, j), detail)
+    X = np.stack([Xx, Xy, np.zeros_like(Xx)], axis=-1)
+    finite_result(X, "the flat positions of the pattern overflow (its side lengths are too "
+                     "large for floating point); scale the boundary lengths down")
+    return Pattern._made(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
+
+
+def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
+    """Folded vertex positions: (N+1, M+1, 3) for scalar omega, (K, N+1, M+1, 3) for K values.
+
+    Raises :class:`InputError` when ``pat`` is not a :class:`Pattern`, for an invalid
+    omega (:func:`~rffqm_nlp.pattern.check_omega`), when the states need more memory than
+    this machine has left, and when the pattern has no finite folded state (a vertex
+    outside MV(alpha, beta): a pattern that was not marched).
+    """
+    check_pattern(pat, "pat")
+    om = check_omega(omega)
+    check_fold_memory(pat.N, pat.M, om.size)
+    ev = Evaluation._made(_fold_function(pat.N, pat.M),
+                          [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
+    states = []
+    for w in np.atleast_1d(om):
+        ev._args[5][0] = w
+        states.append(check_folded(np.stack(ev.run(), axis=-1)))
+    return states[0] if om.ndim == 0 else np.stack(states)
+
+
+def evaluate(f: ca.Function, args: list) -> list[np.ndarray]:
+    """Evaluate ``f`` once on NumPy inputs; dense NumPy outputs (see :class:`Evaluation`).
+    The outputs are what ``f`` computes: NaN in a march's outputs marks a failed panel
+    (:func:`locate_failure`)."""
+    return Evaluation(f, args).run()
+
+
+def _locate_failure(alpha_d, mu, lh, lv):
+    """:func:`locate_failure` on arrays of the right shapes (from a march)."""
     first = ~((alpha_d > 0) & (alpha_d < PI))
     second = ~(np.abs(np.abs(mu) - 1) > MU_TOL)
     final = ~((lv[:, 1:] > 0) & (lh[1:, :] > 0))
@@ -342,56 +596,40 @@ def locate_failure(alpha_d: np.ndarray, mu: np.ndarray, lh: np.ndarray,
     return check, (int(i) + 1, int(j) + 1)
 
 
-def march(bd: BoundaryData) -> Pattern:
-    """March the crease pattern of ``bd`` with the CasADi graph.
-
-    Raises :class:`MarchingError` naming the check and the first failing panel.
-    """
-    if not isinstance(bd, BoundaryData):
-        raise InputError(f"march expects BoundaryData, got {type(bd).__name__}")
-    out = evaluate(pattern_function(bd.N, bd.M), boundary_inputs(bd))
-    alpha, beta, sigma, lh, lv, mu, alpha_d, Xx, Xy = out
-    failure = locate_failure(alpha_d, mu, lh, lv)
-    if failure is not None:
-        check, (i, j) = failure
-        detail = (f"alpha_d = {alpha_d[i - 1, j - 1]:.6g}, mu_abc = {mu[i - 1, j - 1]:.6g}, "
-                  f"l_cd = {lv[i - 1, j]:.6g}, l_bd = {lh[i, j - 1]:.6g}")
-        raise MarchingError(check, (i, j), detail)
-    X = np.stack([Xx, Xy, np.zeros_like(Xx)], axis=-1)
-    return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
-
-
-def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
-    """Folded vertex positions: (N+1, M+1, 3) for scalar omega, (K, N+1, M+1, 3) for K values."""
-    if not isinstance(pat, Pattern):
-        raise InputError(f"fold expects a Pattern, got {type(pat).__name__}")
-    om = check_omega(omega)
-    ev = Evaluation(fold_function(pat.N, pat.M),
-                    [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.0])
-    states = []
-    for w in np.atleast_1d(om):
-        ev.set(5, w)
-        states.append(np.stack(ev.run(), axis=-1))
-    return states[0] if om.ndim == 0 else np.stack(states)
-
-
-def evaluate(f: ca.Function, args: list) -> list[np.ndarray]:
-    """Evaluate ``f`` once on NumPy inputs; dense NumPy outputs (see :class:`Evaluation`)."""
-    return Evaluation(f, args).run()
-
-
 class Evaluation:
     """A CasADi Function evaluated on NumPy arrays in place, through its buffer.
 
     This skips the DM conversions of ``Function.call``, a large share of the time of a large
-    march or fold, and lets one input be changed between runs.
+    march or fold, and lets one input be changed between runs. ``f`` is a CasADi Function,
+    ``args`` one array of real numbers per input with exactly as many entries as the input
+    has nonzeros (any shape; NaN and infinity pass through to ``f``); anything else raises
+    :class:`InputError` before the buffer is touched.
     """
 
     def __init__(self, f: ca.Function, args: list):
+        if not isinstance(f, ca.Function):
+            raise InputError(f"f must be a CasADi Function, got {describe_argument(f)}")
+        if isinstance(args, (str, bytes)) or not isinstance(args, (list, tuple)) \
+                or len(args) != f.n_in():
+            raise InputError(f"args must be a list of {f.n_in()} arrays (one per input of "
+                             f"{f.name()}), got {describe_argument(args)}")
         self._f = f
+        self._start([self._input(k, a) for k, a in enumerate(args)])
+
+    @classmethod
+    def _made(cls, f: ca.Function, args: list) -> "Evaluation":
+        """An Evaluation of this module's own inputs (arrays of numbers of the right sizes,
+        from checked boundary data or a Pattern): no checks, no time spent on them."""
+        ev = cls.__new__(cls)
+        ev._f = f
+        ev._start([np.array(np.ravel(a, order="F"), dtype=float) for a in args])
+        return ev
+
+    def _start(self, args: list[np.ndarray]) -> None:
+        """Point the buffer at the input vectors ``args`` and at new output arrays."""
+        f = self._f
+        self._args = args
         self._buf, self._trigger = f.buffer()
-        self._args = [np.ascontiguousarray(np.asarray(a, dtype=float).ravel(order="F"))
-                      for a in args]
         for k, a in enumerate(self._args):
             self._buf.set_arg(k, memoryview(a))
         self._res = [np.empty(f.nnz_out(k)) for k in range(f.n_out())]
@@ -402,9 +640,28 @@ class Evaluation:
                        else tuple(np.asarray(i) for i in f.sparsity_out(k).get_triplet())
                        for k in range(f.n_out())]
 
+    def _input(self, k: int, value: Any) -> np.ndarray:
+        """Input ``k`` as a contiguous float vector of its nonzeros, checked."""
+        if (isinstance(value, (float, np.floating)) or isinstance(value, np.ndarray)
+                and value.dtype.kind in "iuf" and value.ndim <= 2):
+            arr = np.asarray(value, dtype=float)        # the quick way: numbers of the size
+            if arr.size == self._f.nnz_in(k):
+                return np.array(arr.ravel(order="F"))     # a copy: set() writes into it
+        name = self._f.name_in(k)
+        want = self._f.nnz_in(k)
+        arr = finite_array(value, f"input {name} of {self._f.name()}", finite=False,
+                           allowed=f"an array of {want} real numbers")
+        if arr.size != want:
+            raise InputError(f"input {name} of {self._f.name()} must have {want} entries "
+                             f"({self._f.size1_in(k)} x {self._f.size2_in(k)}), got shape "
+                             f"{arr.shape}")
+        return np.array(arr.ravel(order="F"))
+
     def set(self, k: int, value) -> None:
         """Overwrite input ``k`` in place (same size)."""
-        self._args[k][:] = np.asarray(value, dtype=float).ravel(order="F")
+        if not (type(k) is int and 0 <= k < len(self._args)):
+            k = check_argument(k, Key("whole", low=0, high=len(self._args) - 1), "k")
+        self._args[k][:] = self._input(k, value)
 
     def run(self) -> list[np.ndarray]:
         """Evaluate; fresh dense output arrays in the Function's output shapes."""
@@ -424,20 +681,23 @@ def fold_angles(pat: Pattern, omega: float) -> tuple[np.ndarray, np.ndarray]:
     """Fold angle of every edge at ``omega``: gamma_h (N+1, M), gamma_v (N, M+1).
 
     Boundary edges (bottom and top rows of gamma_h, first and last columns of gamma_v) are
-    not creases and get 0. gamma > 0 is a valley (eq:MVAngles).
+    not creases and get 0. gamma > 0 is a valley (eq:MVAngles). ``omega`` is one number in
+    [-pi, pi]; :class:`InputError` as :func:`fold`.
     """
-    om = float(check_omega(omega))
+    check_pattern(pat, "pat")
+    om = check_fold_angle(omega)
     kh, kv = (k.full() for k in _multiplier_function(pat.N, pat.M)(pat.alpha, pat.beta,
                                                                    pat.sigma))
     half = om / 2
-    gh = 2 * np.arctan2(kh[:, :-1] * np.sin(half), np.cos(half))
-    gv = 2 * np.arctan2(kv[:-1, :] * np.sin(half), np.cos(half))
+    with np.errstate(all="ignore"):
+        gh = 2 * np.arctan2(kh[:, :-1] * np.sin(half), np.cos(half))
+        gv = 2 * np.arctan2(kv[:-1, :] * np.sin(half), np.cos(half))
     gh[[0, -1], :] = 0.0
     gv[:, [0, -1]] = 0.0
-    return gh, gv
+    return check_folded(gh), check_folded(gv)
 
 
 @lru_cache(maxsize=None)
 def _multiplier_function(N: int, M: int) -> ca.Function:
     sym = [ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma")]
-    return ca.Function("multipliers", sym, list(fold_multipliers(*sym)))
+    return ca.Function("multipliers", sym, list(_fold_multipliers(*sym)))

@@ -20,21 +20,46 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .boundary import BoundaryData
-from .errors import MarchingError
-from .pattern import Pattern, check_omega
+from .backend import check_formula_args, finite_array, finite_result
+from .boundary import BoundaryData, check_boundary
+from .errors import InputError, MarchingError
+from .pattern import (Pattern, check_fold_memory, check_folded, check_march_memory, check_omega,
+                      check_pattern)
 
 #: | |mu_abc| - 1 | at or below this fails the second check (eq:secondCheck).
 SECOND_CHECK_TOL = 1e-12
 
 _CHECKS = ("first", "second", "final")
 
+#: Why a vertex's fold-angle multiplier has no finite value, for the errors.
+_POLE = ("sigma is not in MV(alpha, beta) (cos(beta) = sigma cos(alpha)), where the "
+         "fold-angle multiplier is 0 or infinite; give an admissible vertex (Theorem 2.1)")
+
+
+def _vertex_args(alpha, beta, sigma) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arguments of a one-vertex formula checked, as float arrays: finite numbers that
+    broadcast together, sigma +1 or -1 (:func:`rffqm_nlp.backend.check_formula_args`)."""
+    if check_formula_args(alpha=alpha, beta=beta, sigma=sigma):
+        raise InputError("the NumPy model takes numbers and NumPy arrays, not CasADi "
+                         "symbols; use rffqm_nlp.vertex for those")
+    return tuple(np.asarray(x, dtype=float) for x in (alpha, beta, sigma))
+
 
 # --------------------------------------------------------------------------- one vertex
 
 def mu2(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed; the
-    arguments in :func:`rffqm_nlp.vertex.mu2`'s order."""
+    arguments in :func:`rffqm_nlp.vertex.mu2`'s order. Raises :class:`InputError` for
+    arguments that are not finite numbers broadcasting together (sigma +1 or -1) and where
+    sigma is not in MV(alpha, beta) (mu2 is 0 or infinite there)."""
+    alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
+    with np.errstate(all="ignore"):
+        value = _mu2(alpha, beta, sigma)
+        finite_result((value, 1 / value), f"mu2 has no finite value: {_POLE}")
+    return value
+
+
+def _mu2(alpha, beta, sigma):
     return _mu2_cs(np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta), sigma)
 
 
@@ -46,23 +71,52 @@ def _mu2_cs(ca, sa, cb, sb, sigma):
 def mu1(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """mu_1^{-sigma}(alpha, beta) = mu_2^{-sigma}(alpha, pi - beta) (eq:foldAngMult).
 
-    ``sigma`` is the vertex sign; the result equals 1 / mu2(alpha, beta, sigma).
+    ``sigma`` is the vertex sign; the result equals 1 / mu2(alpha, beta, sigma). Raises
+    :class:`InputError` as :func:`mu2` does.
     """
-    return mu2(alpha, np.pi - beta, -sigma)
+    alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
+    with np.errstate(all="ignore"):
+        value = _mu1(alpha, beta, sigma)
+        finite_result((value, 1 / value), f"mu1 has no finite value: {_POLE}")
+    return value
+
+
+def _mu1(alpha, beta, sigma):
+    return _mu2(alpha, np.pi - beta, -sigma)
 
 
 def gamma2_bar(omega: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
                sigma: ArrayLike) -> np.ndarray:
     """gamma_2bar^sigma(omega; alpha, beta) of Theorem 2.1 in the form
-    tan(gamma/2) = -tan(omega/2) / mu2 (docs/paper.md s.2), omega in [-pi, pi]."""
-    return _half_angle_map(omega, -1.0 / mu2(alpha, beta, sigma))
+    tan(gamma/2) = -tan(omega/2) / mu2 (docs/paper.md s.2), omega in [-pi, pi]. Raises
+    :class:`InputError` as :func:`mu2` does, and for omega outside [-pi, pi]."""
+    return _half_angle_map(*_together(_angles(omega), -1.0 / mu2(alpha, beta, sigma)))
 
 
 def gamma1_bar(omega: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
                sigma: ArrayLike) -> np.ndarray:
     """gamma_1bar^{-sigma}(omega; alpha, beta) (eq:inverse), the inverse of
-    :func:`gamma2_bar`: tan(gamma/2) = -tan(omega/2) / mu1."""
-    return _half_angle_map(omega, -1.0 / mu1(alpha, beta, sigma))
+    :func:`gamma2_bar`: tan(gamma/2) = -tan(omega/2) / mu1. Raises :class:`InputError` as
+    :func:`gamma2_bar` does."""
+    return _half_angle_map(*_together(_angles(omega), -1.0 / mu1(alpha, beta, sigma)))
+
+
+def _together(w: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """omega and a vertex's multiplier factor, unless their shapes do not broadcast."""
+    try:
+        np.broadcast_shapes(np.shape(w), np.shape(k))
+    except ValueError:
+        raise InputError(f"omega and the vertex arguments must broadcast together, got "
+                         f"shapes {np.shape(w)} and {np.shape(k)}") from None
+    return w, k
+
+
+def _angles(omega) -> np.ndarray:
+    """omega (any shape) checked: finite numbers in [-pi, pi]."""
+    w = finite_array(omega, "omega", allowed="a number or an array of numbers in [-pi, pi]")
+    if np.any(np.abs(w) > np.pi):
+        raise InputError(f"omega must lie in [-pi, pi], got {float(w[np.abs(w) > np.pi][0]):g}")
+    return w
 
 
 def _half_angle_map(omega, k):
@@ -82,12 +136,18 @@ def march(bd: BoundaryData) -> Pattern:
     """March the crease pattern from the boundary data (eq:marchingSector .. eq:finalCheck).
 
     Raises :class:`MarchingError` naming the check ("first", "second", "final") and the
-    1-based panel of the first failure in marching order (row-major).
+    1-based panel of the first failure in marching order (row-major); :class:`InputError`
+    when ``bd`` is not :class:`BoundaryData`, when the march needs more memory than this
+    machine has left, and when the flat positions overflow (sides near the largest float).
     """
+    check_boundary(bd)
+    check_march_memory(bd.N, bd.M)
     alpha, beta, sigma, lh, lv, mu = _march_diagonals(bd)
     phi_h, phi_v = _edge_directions(alpha, beta)
     X = _assemble(_edge_vectors(lh, phi_h), _edge_vectors(lv, phi_v))
-    return Pattern(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
+    finite_result(X, "the flat positions of the pattern overflow (its side lengths are too "
+                     "large for floating point); scale the boundary lengths down")
+    return Pattern._made(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, mu=mu, X=X)
 
 
 #: Rows of the per-vertex table used while marching.
@@ -227,9 +287,15 @@ def fold(pat: Pattern, omega: ArrayLike) -> np.ndarray:
     Positions are cumulative sums of flat edge vectors rotated by the R^{ij} of a panel
     each edge bounds: horizontal edges move with the panel above (the top row with the one
     below), vertical edges with the panel to the right (the last column with the one left).
+    Raises :class:`InputError` when ``pat`` is not a :class:`Pattern`, for an invalid
+    omega (:func:`~rffqm_nlp.pattern.check_omega`), when the states need more memory than
+    this machine has left, and when the pattern has no finite folded state (a vertex
+    outside MV(alpha, beta): a pattern that was not marched).
     """
+    check_pattern(pat, "pat")
     w, scalar = _omegas(omega)
     N, M, K = pat.N, pat.M, w.size
+    check_fold_memory(N, M, K)
     phi_h, phi_v = _edge_directions(pat.alpha, pat.beta)
     Eh, Ev = _edge_vectors(pat.lh, phi_h), _edge_vectors(pat.lv, phi_v)
     Yh, Yv = np.empty((3, K, N + 1, M)), np.empty((3, K, N, M + 1))
@@ -238,6 +304,7 @@ def fold(pat: Pattern, omega: ArrayLike) -> np.ndarray:
         Yv[:, :, p] = _rotate(np.concatenate([R, R[:, -1:]], axis=1), Ev[:, p])
     Yh[:, :, N] = _rotate(R, Eh[:, N])
     Y = _assemble(Yh, Yv)
+    check_folded(Y)
     return Y[0] if scalar else Y
 
 
@@ -247,15 +314,20 @@ def fold_angles(pat: Pattern, omega: ArrayLike) -> tuple[np.ndarray, np.ndarray]
     Returns gamma_h (N+1, M) with gamma_1^{ij} on the edge (i, j) -> (i, j+1) and gamma_v
     (N, M+1) with gamma_2^{ij} on the edge (i, j) -> (i+1, j), 0 on the boundary edges
     (first/last row of gamma_h, first/last column of gamma_v); a leading K axis for an
-    array ``omega``.
+    array ``omega``. Raises :class:`InputError` as :func:`fold` does.
     """
+    check_pattern(pat, "pat")
     w, scalar = _omegas(omega)
+    check_fold_memory(pat.N, pat.M, w.size)
     k1, k2 = _fold_tangent_factors(pat)
     S, C = np.sin(w / 2)[:, None, None], _cos_half(w)[:, None, None]
-    gh = 2 * np.arctan2(k1[:, :-1] * S, C)
-    gv = 2 * np.arctan2(k2[:-1] * S, C)
+    with np.errstate(all="ignore"):
+        gh = 2 * np.arctan2(k1[:, :-1] * S, C)
+        gv = 2 * np.arctan2(k2[:-1] * S, C)
     gh[:, [0, -1]] = 0.0
     gv[:, :, [0, -1]] = 0.0
+    check_folded(gh)
+    check_folded(gv)
     return (gh[0], gv[0]) if scalar else (gh, gv)
 
 
@@ -275,9 +347,10 @@ def _fold_tangent_factors(pat: Pattern) -> tuple[np.ndarray, np.ndarray]:
     """
     a, b, s = pat.alpha, pat.beta, pat.sigma
     k1_bottom = np.cumprod(np.concatenate([[1.0], -s[0, 1:]]))
-    k2 = (-k1_bottom / mu2(a[0], b[0], s[0])) * np.cumprod(
-        np.concatenate([np.ones((1, s.shape[1])), s[1:]]), axis=0)
-    k1 = -k2 / mu1(a, b, s)
+    with np.errstate(all="ignore"):     # a pole gives NaN states, refused by the callers
+        k2 = (-k1_bottom / _mu2(a[0], b[0], s[0])) * np.cumprod(
+            np.concatenate([np.ones((1, s.shape[1])), s[1:]]), axis=0)
+        k1 = -k2 / _mu1(a, b, s)
     k1[0] = k1_bottom
     return k1, k2
 

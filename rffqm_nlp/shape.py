@@ -10,6 +10,11 @@ Lattice arguments come in one of two forms, and results come back in the same fo
 
 The lattice is the paper's integer lattice r(i, j) with parameter spacings hu (along i) and
 hv (along j), both 1 by default.
+
+Numeric arguments are checked (finite real numbers of the shapes said; a target a
+:class:`~rffqm_nlp.surfaces.Surface` or points), and so are numeric results: a lattice with
+no finite result (a degenerate one, or coordinates so large that their products overflow)
+raises :class:`~rffqm_nlp.errors.InputError` instead of giving NaN or infinity.
 """
 
 from __future__ import annotations
@@ -21,9 +26,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import directed_hausdorff
 
-from .backend import is_casadi, math_for
+from .backend import (check_argument, describe_argument, finite_array, finite_result, is_casadi,
+                      math_for)
 from .errors import InputError
-from .surfaces import Surface, point_set_diameter
+from .files import Key
+from .surfaces import Surface, check_surface, point_set_diameter
 
 Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
 Forms = tuple[Any, Any, Any, Any, Any, Any]
@@ -36,15 +43,18 @@ def _split(P: Lattice) -> tuple[list, bool]:
     if isinstance(P, np.ndarray) and P.ndim == 3:
         if P.shape[2] != 3:
             raise InputError(f"a lattice array must have shape (n, m, 3), got {P.shape}")
+        P = finite_array(P, "the lattice", allowed="an (n, m, 3) array of finite numbers")
         return [P[..., k] for k in range(3)], True
-    if isinstance(P, Sequence) and len(P) == 3:
-        comps = [c if is_casadi(c) else np.asarray(c, dtype=float) for c in P]
+    if isinstance(P, Sequence) and not isinstance(P, str) and len(P) == 3:
+        comps = [c if is_casadi(c) else finite_array(
+            c, f"the lattice's component {k}", ndim=2, allowed="an (n, m) matrix of finite "
+            "numbers") for k, c in enumerate(P)]
         if any(len(c.shape) != 2 or c.shape != comps[0].shape for c in comps):
             raise InputError("a lattice given by components needs three 2-D matrices of one "
                              f"shape, got shapes {[tuple(c.shape) for c in comps]}")
         return comps, False
     raise InputError("a lattice must be an (n, m, 3) array or a sequence of three (n, m) "
-                     f"matrices (x, y, z), got {type(P).__name__}")
+                     f"matrices (x, y, z), got {describe_argument(P)}")
 
 
 def _join(comps: Sequence[Any], stacked: bool) -> Any:
@@ -97,10 +107,24 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
     a term that sees them, such as the design's position term (docs/paper.md s.8).
     """
     comps, _ = _split(P)
+    hu = check_argument(hu, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hu")
+    hv = check_argument(hv, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hv")
     n, m = comps[0].shape
     if n < 3 or m < 3:
         raise InputError(f"fundamental_forms needs a lattice of at least 3 x 3 points, got "
                          f"{n} x {m}")
+    if is_casadi(*comps):
+        return _forms(comps, hu, hv)
+    with np.errstate(all="ignore"):
+        forms = _forms(comps, hu, hv)
+    return finite_result(forms, "fundamental_forms has no finite value: the lattice is "
+                                "degenerate (r_u x r_v = 0 at an interior point) or its "
+                                "coordinates are too large for floating point")
+
+
+def _forms(comps: list, hu: float, hv: float) -> Forms:
+    """The forms of :func:`fundamental_forms` from the components."""
+    n, m = comps[0].shape
 
     def at(di: int, dj: int) -> list:
         return [_shift(c, di, dj, n, m) for c in comps]
@@ -125,13 +149,14 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
 def _points(P: Any, what: str) -> tuple[np.ndarray, tuple[int, ...]]:
     """(k, 3) numeric points of a (k, 3) array, an (n, m, 3) lattice or a component triple,
     and the (..., 3) shape they came in."""
-    if isinstance(P, Sequence) and len(P) == 3 and np.ndim(P[0]) == 2:
-        P = np.stack([np.asarray(c, dtype=float) for c in P], axis=-1)
-    arr = np.asarray(P, dtype=float)
-    if arr.shape[-1:] != (3,) or arr.ndim < 2:
-        raise InputError(f"{what} must be points of shape (k, 3) or (n, m, 3), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{what} contains NaN or inf")
+    allowed = "finite points of shape (k, 3) or (n, m, 3), at least one"
+    if (isinstance(P, Sequence) and not isinstance(P, str) and len(P) == 3
+            and not is_casadi(*P) and all(np.ndim(c) == 2 for c in P)
+            and len({np.shape(c) for c in P}) == 1):
+        P = np.stack([finite_array(c, what, allowed=allowed) for c in P], axis=-1)
+    arr = finite_array(P, what, allowed=allowed)
+    if arr.shape[-1:] != (3,) or arr.ndim < 2 or arr.size == 0:
+        raise InputError(f"{what} must be {allowed}, got shape {arr.shape}")
     return arr.reshape(-1, 3), arr.shape
 
 
@@ -142,15 +167,22 @@ def kabsch(P: Any, Q: Any, reflection: bool = False) -> tuple[np.ndarray, np.nda
     (p, _), (q, _) = _points(P, "P"), _points(Q, "Q")
     if p.shape != q.shape:
         raise InputError(f"kabsch needs corresponding points, got {len(p)} and {len(q)}")
+    reflection = check_argument(reflection, Key("bool"), "reflection")
     pc, qc = p.mean(axis=0), q.mean(axis=0)
-    u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+    with np.errstate(all="ignore"):
+        H = (p - pc).T @ (q - qc)
+    finite_result(H, "kabsch: the points are too large for floating point (their products "
+                     "overflow); scale them down")
+    u, _, vt = np.linalg.svd(H)
     d = np.ones(3)
     if not reflection:
         d[2] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     R = vt.T @ np.diag(d) @ u.T
     t = qc - R @ pc
-    rms = float(np.sqrt(np.mean(np.sum((p @ R.T + t - q) ** 2, axis=1))))
-    return R, t, rms
+    with np.errstate(all="ignore"):
+        rms = float(np.sqrt(np.mean(np.sum((p @ R.T + t - q) ** 2, axis=1))))
+    return finite_result((R, t, rms), "kabsch: the points are too large for floating point "
+                                      "(their distances overflow); scale them down")
 
 
 def align(P: Any, Q: Any, reflection: bool = False) -> np.ndarray:
@@ -173,7 +205,13 @@ def distances_to(points: Any, target: Surface | Any) -> np.ndarray:
         dist = target.closest_points(pts)[2]
     else:
         dist = cKDTree(_points(target, "target points")[0]).query(pts)[0]
-    return np.asarray(dist, dtype=float).reshape(shape[:-1])
+    return _finite_distances(np.asarray(dist, dtype=float).reshape(shape[:-1]))
+
+
+def _finite_distances(value: Any) -> Any:
+    """Distances (or their summaries) unless one overflowed."""
+    return finite_result(value, "the distances overflow: the points are too far from the "
+                                "target for floating point")
 
 
 def rms_distance(points: Any, target: Surface | Any) -> float:
@@ -185,7 +223,8 @@ def rms_distance(points: Any, target: Surface | Any) -> float:
     Points are not aligned first: use :func:`align` for that.
     """
     d = distances_to(points, target)
-    return float(np.sqrt(np.mean(d**2)))
+    with np.errstate(all="ignore"):
+        return _finite_distances(float(np.sqrt(np.mean(d**2))))
 
 
 def hausdorff_distance(points: Any, target: Surface | Any) -> float:
@@ -194,7 +233,9 @@ def hausdorff_distance(points: Any, target: Surface | Any) -> float:
     if isinstance(target, Surface):
         return float(distances_to(points, target).max())
     p, q = _points(points, "points")[0], _points(target, "target points")[0]
-    return float(max(directed_hausdorff(p, q)[0], directed_hausdorff(q, p)[0]))
+    with np.errstate(all="ignore"):
+        return _finite_distances(float(max(directed_hausdorff(p, q)[0],
+                                           directed_hausdorff(q, p)[0])))
 
 
 def relative_fit(points: Any, target: Surface | Any) -> dict[str, float]:
@@ -203,7 +244,7 @@ def relative_fit(points: Any, target: Surface | Any) -> dict[str, float]:
     between two target points)."""
     diameter = (target.diameter() if isinstance(target, Surface)
                 else point_set_diameter(_points(target, "target points")[0]))
-    if diameter <= 0:
+    if not diameter > 0:
         raise InputError("the target has zero diameter, so a relative fit is undefined")
     return {"rms": rms_distance(points, target) / diameter,
             "hausdorff": hausdorff_distance(points, target) / diameter}
@@ -223,9 +264,12 @@ def lattice_area(P: Any) -> float:
         raise InputError(f"lattice_area needs an (n, m, 3) lattice, got shape {shape}")
     pts = flat.reshape(shape)
     a, b, c, d = pts[:-1, :-1], pts[1:, :-1], pts[1:, 1:], pts[:-1, 1:]
-    first = np.linalg.norm(np.cross(b - a, c - a), axis=-1)
-    second = np.linalg.norm(np.cross(c - a, d - a), axis=-1)
-    return float(0.5 * (first.sum() + second.sum()))
+    with np.errstate(all="ignore"):
+        first = np.linalg.norm(np.cross(b - a, c - a), axis=-1)
+        second = np.linalg.norm(np.cross(c - a, d - a), axis=-1)
+        area = float(0.5 * (first.sum() + second.sum()))
+    return finite_result(area, "lattice_area overflows: the lattice's coordinates are too "
+                               "large for floating point")
 
 
 def surface_area(target: Surface) -> float:
@@ -233,6 +277,7 @@ def surface_area(target: Surface) -> float:
     Gauss-Legendre rule (:data:`AREA_CELLS` cells of :data:`AREA_ORDER` nodes per direction)
     with the surface's exact derivatives. For a :class:`~rffqm_nlp.meshes.Mesh` this is the
     area of its fitted spline over the domain."""
+    check_surface(target, "target")
     nodes, weights = np.polynomial.legendre.leggauss(AREA_ORDER)
     (u0, u1), (v0, v1) = target.domain
 
@@ -244,7 +289,11 @@ def surface_area(target: Surface) -> float:
 
     (u, wu), (v, wv) = rule(u0, u1), rule(v0, v1)
     r_u, r_v = target.derivatives(u[:, None], v[None, :])
-    return float(np.sum(np.linalg.norm(np.cross(r_u, r_v), axis=-1) * wu[:, None] * wv[None, :]))
+    with np.errstate(all="ignore"):
+        area = float(np.sum(np.linalg.norm(np.cross(r_u, r_v), axis=-1)
+                            * wu[:, None] * wv[None, :]))
+    return finite_result(area, f"the area of {target.name!r} overflows: its coordinates are "
+                               "too large for floating point")
 
 
 def shape_fit(folded: np.ndarray, target: Surface) -> dict[str, float]:
@@ -253,6 +302,7 @@ def shape_fit(folded: np.ndarray, target: Surface) -> dict[str, float]:
     diameter: ``rms_surface``, ``hausdorff`` of the coarse lattice ``folded[::2, ::2]``,
     ``rms_surface_vertices``, ``hausdorff_vertices`` of every vertex, and ``coverage``: the
     coarse lattice's :func:`lattice_area` over the target's :func:`surface_area`."""
+    check_surface(target, "target")
     shape = _points(folded, "folded")[1]
     if len(shape) != 3:
         raise InputError(f"shape_fit needs a folded state (2N+1, 2M+1, 3), got shape {shape}")

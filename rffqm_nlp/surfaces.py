@@ -40,11 +40,12 @@ import casadi as ca
 import numpy as np
 import trimesh
 from scipy.optimize import brentq
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from . import backend
+from . import backend, memory
+from .backend import check_argument, describe_argument, finite_array, finite_result
 from .errors import InputError, SurfaceError, one_line
-from .files import Key, check_table, check_value, describe_value
+from .files import Key, check_table, shown_name
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
@@ -60,6 +61,34 @@ _CHECK_GRID = 21
 _DIAMETER_GRID = 101
 #: |r_u x r_v| below this times mean |r_u| * mean |r_v| counts as singular.
 _REGULARITY_TOL = 1e-9
+#: Most parameter values along one direction of a grid or lattice (:meth:`Surface.grid_uv`,
+#: :meth:`Surface.lattice_uv`, :func:`grid_faces`); how many points one evaluation may
+#: take is bounded by the memory this machine has left (:func:`refuse_points`).
+MAX_GRID = 100_000
+#: Bytes per point and output row of an evaluation (the result, its copies), and the
+#: size from which it is checked against the memory left (smaller ones do not read /proc).
+_BYTES_PER_ENTRY, _MEMORY_CHECK_FROM = 32.0, 1e8
+
+
+def refuse_points(count: float, rows: int, what: str) -> None:
+    """Refuse (:class:`InputError`) an evaluation of ``rows`` numbers at each of ``count``
+    points (``what``) that this machine cannot hold."""
+    count = check_argument(count, Key("number", low=0.0), "count")
+    rows = check_argument(rows, Key("whole", low=0, high=2**31), "rows")
+    what = check_argument(what, Key("string"), "what")
+    need = _BYTES_PER_ENTRY * count * rows
+    if need > _MEMORY_CHECK_FROM:
+        memory.refuse_beyond(need, what, "use fewer points")
+
+
+def check_surface(surface: Any, name: str = "target") -> "Surface":
+    """``surface`` if it is a :class:`Surface` (a built-in from :func:`get`, a
+    :class:`Custom` or a :class:`~rffqm_nlp.meshes.Mesh`), else :class:`SurfaceError`
+    naming ``name`` and what it got."""
+    if not isinstance(surface, Surface):
+        raise SurfaceError(f"{name} must be a surface (rffqm_nlp.surfaces.get(name), "
+                           f"surfaces.Custom or surfaces.Mesh), got {describe_argument(surface)}")
+    return surface
 
 
 class Surface:
@@ -70,13 +99,14 @@ class Surface:
     """
 
     def __init__(self, name: str, params: Mapping[str, float], domain: Any):
-        self.name = name
-        self.params = dict(params)
+        self.name = _checked_value(name, Key("string"), "name")
+        self.params = _checked_value(params, Key("table", item=Key("number")), "params")
         self.domain = _check_domain(domain)
         self._check_regular()
 
     def _r(self, u: Any, v: Any) -> tuple[Any, Any, Any]:
-        raise NotImplementedError
+        raise SurfaceError(f"{type(self).__name__} has no r(u, v): subclass Surface with "
+                           "_r(u, v), or use surfaces.Custom(fn, domain) or surfaces.get(name)")
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
@@ -112,8 +142,20 @@ class Surface:
     def _evaluate(self, fn: ca.Function, u: Any, v: Any) -> tuple[tuple[int, ...], list]:
         """Evaluate ``fn`` at the broadcast of u, v: (shape, outputs as (rows, n) arrays).
 
-        Raises SurfaceError where an output is not finite (outside the domain, singular)."""
-        uu, vv = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
+        Raises SurfaceError for u, v that are not finite numbers broadcasting together, and
+        where an output is not finite (outside the domain, singular)."""
+        u = finite_array(u, "u", allowed="a finite number or an array of finite numbers",
+                         error=SurfaceError)
+        v = finite_array(v, "v", allowed="a finite number or an array of finite numbers",
+                         error=SurfaceError)
+        try:
+            shape = np.broadcast_shapes(u.shape, v.shape)
+        except ValueError:
+            raise SurfaceError(f"u and v must broadcast together, got shapes {u.shape} and "
+                               f"{v.shape}") from None
+        refuse_points(math.prod(shape), sum(fn.nnz_out(k) for k in range(fn.n_out())) + 2,
+                      f"evaluating {self.name!r} at {math.prod(shape)} points")
+        uu, vv = np.broadcast_arrays(u, v)
         if uu.size == 0:
             return uu.shape, [np.zeros((fn.size1_out(k), 0)) for k in range(fn.n_out())]
         # row vectors of n columns make CasADi evaluate fn n times (no Python loop)
@@ -164,9 +206,9 @@ class Surface:
 
     # -- samples, lattices, meshes ------------------------------------------------------
     def grid_uv(self, n_u: int, n_v: int) -> tuple[np.ndarray, np.ndarray]:
-        """(u (n_u,), v (n_v,)): uniform parameter values over the whole domain."""
-        n_u, n_v = (_checked_value(n, Key("whole", low=2), k) for n, k in (
-            (n_u, "n_u"), (n_v, "n_v")))
+        """(u (n_u,), v (n_v,)): uniform parameter values over the whole domain; n_u, n_v
+        whole numbers in [2, :data:`MAX_GRID`]."""
+        n_u, n_v = (_checked_value(n, _GRID, k) for n, k in ((n_u, "n_u"), (n_v, "n_v")))
         (u0, u1), (v0, v1) = self.domain
         return np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v)
 
@@ -200,7 +242,8 @@ class Surface:
         directions) so that the mean distance between lattice neighbours along i is s_i and
         along j is s_j.
         """
-        N, M = (_checked_value(n, Key("whole", low=1), k) for n, k in ((N, "N"), (M, "M")))
+        N, M = (_checked_value(n, Key("whole", low=1, high=MAX_GRID - 1), k)
+                for n, k in ((N, "N"), (M, "M")))
         if spacing is None:
             return self.grid_uv(N + 1, M + 1)
         s_i, s_j = _checked_value(spacing, _SPACING, "spacing")
@@ -248,11 +291,14 @@ class Surface:
         whose closest point is regular). Returns (uv (..., 2), closest (..., 3),
         distances (...)).
         """
-        pts = np.asarray(points, dtype=float)
-        if pts.shape[-1:] != (3,) or not np.all(np.isfinite(pts)):
+        pts = finite_array(points, "points", allowed="a finite array of shape (..., 3)",
+                           error=SurfaceError)
+        if pts.shape[-1:] != (3,):
             raise SurfaceError(f"points must be a finite array of shape (..., 3), got shape "
                                f"{pts.shape}")
         shape, pts = pts.shape[:-1], pts.reshape(-1, 3)
+        resolution = _checked_value(resolution, _GRID, "resolution")
+        refuse_points(resolution * resolution, 12, f"a {resolution} x {resolution} sample")
         u, v = self.grid_uv(resolution, resolution)
         _, idx = cKDTree(self.sample(resolution, resolution).reshape(-1, 3)).query(pts)
         uu, vv = u[idx // resolution], v[idx % resolution]
@@ -264,7 +310,10 @@ class Surface:
             if active.size == 0:
                 break
         closest = self.point(uu, vv)
-        dist = np.linalg.norm(closest - pts, axis=1)
+        with np.errstate(all="ignore"):
+            dist = np.linalg.norm(closest - pts, axis=1)
+        finite_result(dist, "the distances to the surface overflow: the points are too far "
+                            "from it for floating point")
         return (np.stack([uu, vv], -1).reshape(shape + (2,)), closest.reshape(shape + (3,)),
                 dist.reshape(shape))
 
@@ -324,7 +373,10 @@ class Surface:
 
 def grid_faces(n_u: int, n_v: int) -> np.ndarray:
     """Triangles of an (n_u, n_v) vertex grid (vertex (a, b) = a*n_v + b), two per cell:
-    (a,b)-(a+1,b)-(a+1,b+1) and (a,b)-(a+1,b+1)-(a,b+1), both oriented like r_u x r_v."""
+    (a,b)-(a+1,b)-(a+1,b+1) and (a,b)-(a+1,b+1)-(a,b+1), both oriented like r_u x r_v.
+    n_u, n_v are whole numbers in [2, :data:`MAX_GRID`]."""
+    n_u, n_v = (_checked_value(n, _GRID, k) for n, k in ((n_u, "n_u"), (n_v, "n_v")))
+    refuse_points(n_u * n_v, 12, f"the faces of a {n_u} x {n_v} grid")
     idx = np.arange(n_u * n_v).reshape(n_u, n_v)
     p, q, r, s = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
     tri = np.stack([np.stack([p, q, r], -1), np.stack([p, r, s], -1)], axis=2)
@@ -333,9 +385,16 @@ def grid_faces(n_u: int, n_v: int) -> np.ndarray:
 
 def mean_neighbour_distances(points: np.ndarray) -> tuple[float, float]:
     """Mean distance between lattice neighbours of (n, m, 3) points along i and along j."""
-    d_i = np.linalg.norm(np.diff(points, axis=0), axis=-1)
-    d_j = np.linalg.norm(np.diff(points, axis=1), axis=-1)
-    return float(d_i.mean()), float(d_j.mean())
+    points = finite_array(points, "points", shape=(None, None, 3))
+    if min(points.shape[:2]) < 2:
+        raise InputError(f"points must be a lattice of at least 2 x 2 points, got shape "
+                         f"{points.shape}")
+    with np.errstate(all="ignore"):
+        d_i = np.linalg.norm(np.diff(points, axis=0), axis=-1)
+        d_j = np.linalg.norm(np.diff(points, axis=1), axis=-1)
+        means = float(d_i.mean()), float(d_j.mean())
+    return finite_result(means, "the neighbour distances overflow: the points are too large "
+                                "for floating point")
 
 
 def point_set_diameter(points: np.ndarray) -> float:
@@ -346,10 +405,23 @@ def point_set_diameter(points: np.ndarray) -> float:
     in a pair longer than d if |p - c| + R >= d, and the pairs of those points are compared
     in blocks. On a convex cap every sampled point is a hull vertex, so the pruning is what
     keeps it fast (measured against all pairs: docs/solvers.md, "Smaller measurements").
+    Raises :class:`InputError` unless the points are finite numbers of shape (..., 3).
     """
-    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    pts = finite_array(points, "points", allowed="a finite array of shape (..., 3)")
+    if pts.shape[-1:] != (3,):
+        raise InputError(f"points must be a finite array of shape (..., 3), got shape "
+                         f"{pts.shape}")
+    with np.errstate(all="ignore"):
+        return finite_result(_diameter_of(pts.reshape(-1, 3)), "the diameter overflows: the "
+                             "points are too large for floating point")
+
+
+def _diameter_of(pts: np.ndarray) -> float:
     if len(pts) > 50:
-        pts = pts[ConvexHull(pts, qhull_options="QJ").vertices]
+        try:
+            pts = pts[ConvexHull(pts, qhull_options="QJ").vertices]
+        except QhullError:    # degenerate (e.g. every point the same): compare them all
+            pts = np.unique(pts, axis=0)
     if len(pts) < 2:
         return 0.0
     a = int(np.argmax(((pts - pts[0]) ** 2).sum(axis=1)))
@@ -379,9 +451,12 @@ class Custom(Surface):
     def __init__(self, fn: Callable[[Any, Any], Any], domain: Any, name: str = "custom",
                  reference: str | None = None):
         if not callable(fn):
-            raise SurfaceError(f"Custom needs a callable fn(u, v) -> (x, y, z), got {fn!r}")
+            raise SurfaceError(f"Custom needs a callable fn(u, v) -> (x, y, z), got "
+                               f"{describe_argument(fn)}")
+        name = _checked_value(name, Key("string"), "name")
         self._fn = fn
-        self.reference = reference
+        self.reference = (None if reference is None else
+                          _checked_value(reference, Key("string", hint="(or None)"), "reference"))
         dom = _check_domain(domain)
         _xyz(fn, ca.SX.sym("u"), ca.SX.sym("v"), "CasADi SX symbols", ca.SX)
         centre = (sum(dom[0]) / 2, sum(dom[1]) / 2)
@@ -409,8 +484,8 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
         out = fn(u, v)
     except Exception as err:
         raise SurfaceError(
-            f"the surface callable raised {type(err).__name__}: {err} when called with "
-            f"{what}; write it with CasADi-compatible math (casadi.sin, ..., or "
+            f"the surface callable raised {type(err).__name__}: {one_line(err)} when called "
+            f"with {what}; write it with CasADi-compatible math (casadi.sin, ..., or "
             f"rffqm_nlp.surfaces.mathlib)") from err
     try:
         parts = ca.vertsplit(ca.vec(out)) if backend.is_casadi(out) else list(out)
@@ -420,9 +495,10 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
     if parts is None or len(parts) != 3 or any(p.shape != (1, 1) for p in parts):
         raise SurfaceError(
             f"the surface callable must return three scalars (x, y, z) when called with "
-            f"{what}, got {out!r}")
+            f"{what}, got {describe_argument(out)}")
     if kind is ca.DM and not all(np.isfinite(float(p)) for p in parts):
-        raise SurfaceError(f"the surface callable returned non-finite values {out!r} at {what}")
+        raise SurfaceError(f"the surface callable returned non-finite values (NaN or "
+                           f"infinity) at {what}")
     return parts[0], parts[1], parts[2]
 
 
@@ -457,13 +533,14 @@ def parse_reference(ref: Any) -> tuple[str, str, str]:
         if _DOTTED.fullmatch(where):
             return "module", where, qualname
     raise SurfaceError(f"[target] python must have the form {_REFERENCE_FORMS}, got "
-                       f"{describe_value(ref)}")
+                       f"{describe_argument(ref)}")
 
 
 def resolve_reference(ref: Any, root: str | Path | None = None) -> str:
     """``ref`` with a file made absolute (relative to ``root``, default the current folder);
     a module reference unchanged."""
     kind, where, qualname = parse_reference(ref)
+    root = _check_root(root)
     if kind == "module":
         return ref
     return f"{Path(root or '.').joinpath(where).absolute()}:{qualname}"
@@ -732,6 +809,14 @@ _BUILTINS: dict[str, _Spec] = {
 }
 
 
+def _check_root(root: Any) -> Path | None:
+    """A folder argument: None, a string or a path."""
+    if root is not None and not isinstance(root, (str, Path)):
+        raise SurfaceError(f"root must be a folder (a string or a path) or None, got "
+                           f"{describe_argument(root)}")
+    return None if root is None else Path(root)
+
+
 def names() -> list[str]:
     """Names of the built-in surfaces."""
     return list(_BUILTINS)
@@ -760,8 +845,12 @@ def get(name: str, domain: Any = None, **params: float) -> Surface:
 
 
 def _spec(name: str) -> _Spec:
+    if not isinstance(name, str):
+        raise SurfaceError(f"name must be the name of a built-in surface (one of "
+                           f"{', '.join(_BUILTINS)}), got {describe_argument(name)}")
     if name not in _BUILTINS:
-        raise SurfaceError(f"unknown surface {name!r}; built-in surfaces: {', '.join(_BUILTINS)}"
+        shown = repr(name) if shown_name(name) == name else shown_name(name)
+        raise SurfaceError(f"unknown surface {shown}; built-in surfaces: {', '.join(_BUILTINS)}"
                            f" (or use python = \"module:function\" for your own)")
     return _BUILTINS[name]
 
@@ -769,6 +858,8 @@ def _spec(name: str) -> _Spec:
 #: ``domain = [[u0, u1], [v0, v1]]`` of a [target] table.
 DOMAIN_KEY = Key("list", length=2, item=Key("list", length=2, item=Key("number")),
                  hint="([[u0, u1], [v0, v1]])")
+#: The count of a grid's parameter values along one direction.
+_GRID = Key("whole", low=2, high=MAX_GRID)
 #: ``spacing = (s_i, s_j)`` of :meth:`Surface.lattice`.
 _SPACING = Key("list", length=2, item=Key("number", low=0, low_open=True), hint="(s_i, s_j)")
 #: The keys of a [target] table with python = ...
@@ -799,7 +890,9 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
     Every key is checked (:func:`rffqm_nlp.files.check_table`).
     """
     if not isinstance(table, Mapping):
-        raise SurfaceError(f"[target] must be a table, got {describe_value(table)}")
+        raise SurfaceError(f"[target] must be a table, got {describe_argument(table)}")
+    root = _check_root(root)
+    trust = _checked_value(trust, Key("bool"), "trust")
     if not rebuildable(table):
         raise SurfaceError(
             f"[target] cannot be rebuilt: the target of this result was {table.get('made_from')} "
@@ -833,6 +926,7 @@ def config_of(surface: Surface) -> dict:
     that no table can name (a lambda, a closure, a :class:`Mesh` made from arrays), the
     record ``{"name", "domain", "rebuildable": False, "made_from"}``, which
     :func:`from_config` refuses with a one-line reason."""
+    check_surface(surface, "surface")
     try:
         return surface.to_config()
     except SurfaceError:
@@ -849,6 +943,8 @@ def config_of(surface: Surface) -> dict:
 
 def rebuildable(table: Mapping[str, Any]) -> bool:
     """Whether a ``[target]`` table names its surface (not a record of :func:`config_of`)."""
+    if not isinstance(table, Mapping):
+        raise SurfaceError(f"[target] must be a table, got {describe_argument(table)}")
     return "rebuildable" not in table
 
 
@@ -861,7 +957,7 @@ def _checked(table: Mapping[str, Any], spec: dict[str, Key]) -> dict[str, Any]:
 
 
 def _checked_value(value: Any, key: Key, name: str) -> Any:
-    return check_value(value, key, name, SurfaceError)
+    return check_argument(value, key, name, SurfaceError)
 
 
 # -- validation helpers -------------------------------------------------------------------

@@ -9,21 +9,47 @@ s.2): for the a-role sector angles (alpha, beta) and sign sigma,
 
 which equal eq:foldAngMult, and mu1^{-sigma} = 1 / mu2^{sigma}. The fold-angle functions are
 tan(gamma2_bar/2) = -tan(omega/2)/mu2 and tan(gamma1_bar/2) = -tan(omega/2)/mu1.
+
+Every function checks its arguments (:func:`rffqm_nlp.backend.check_formula_args`: CasADi
+matrices, or finite real numbers and arrays broadcasting together, a sign sigma +1 or -1)
+and, on numbers, its result: where the formula has no finite value (a multiplier at its
+pole, sigma outside MV(alpha, beta); a panel whose angles sum to a multiple of pi) it
+raises :class:`~rffqm_nlp.errors.InputError` saying so instead of returning NaN or
+infinity. CasADi graphs are returned unchecked.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
 
-from .backend import Scalar, is_casadi, math_for
+from .backend import Scalar, check_formula_args, finite_result, is_casadi, math_for
+from .errors import InputError
+
+#: Why a multiplier has no finite value, for the errors.
+_POLE = ("sigma is not in MV(alpha, beta) (cos(beta) = sigma cos(alpha)), where the "
+         "multiplier is 0 or infinite; give an admissible vertex (Theorem 2.1)")
+
+
+def _arrays(*values: Any) -> tuple:
+    """The (checked) arguments with lists and tuples of numbers as float arrays."""
+    return tuple(np.asarray(v, dtype=float) if isinstance(v, (list, tuple)) else v
+                 for v in values)
+
+
+def _checked(symbolic: bool, value: Any, what: str) -> Any:
+    """``value`` as it is for a graph, else unless it holds NaN or infinity."""
+    return value if symbolic else finite_result(value, what)
 
 
 def mu2(alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """Fold-angle multiplier mu2^sigma(alpha, beta) (eq:foldAngMult), half-angle form."""
-    num, den = mu2_terms(alpha, beta, sigma)
+    symbolic = check_formula_args(alpha=alpha, beta=beta, sigma=sigma)
+    num, den = _mu2_terms(*_arrays(alpha, beta, sigma))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return num / den
+        return _checked(symbolic, num / den, f"mu2 has no finite value: {_POLE}")
 
 
 def mu2_terms(alpha: Scalar, beta: Scalar, sigma: Scalar) -> tuple[Scalar, Scalar]:
@@ -34,6 +60,11 @@ def mu2_terms(alpha: Scalar, beta: Scalar, sigma: Scalar) -> tuple[Scalar, Scala
     proportional to mu2 or to 1 / mu2 can be written without a quotient through the points
     where mu2 is 0 or infinite (see transcription._local_crease_quaternions).
     """
+    check_formula_args(alpha=alpha, beta=beta, sigma=sigma)
+    return _mu2_terms(*_arrays(alpha, beta, sigma))
+
+
+def _mu2_terms(alpha, beta, sigma):
     op = math_for(alpha, beta, sigma)
     h_minus, h_plus = (alpha - beta) / 2, (alpha + beta) / 2
     return (op.where(sigma < 0, op.cos(h_minus), -op.sin(h_minus)),
@@ -42,9 +73,10 @@ def mu2_terms(alpha: Scalar, beta: Scalar, sigma: Scalar) -> tuple[Scalar, Scala
 
 def mu1(alpha: Scalar, beta: Scalar, sigma: Scalar) -> Scalar:
     """Fold-angle multiplier mu1^{-sigma}(alpha, beta) = 1 / mu2^sigma(alpha, beta)."""
-    num, den = mu2_terms(alpha, beta, sigma)
+    symbolic = check_formula_args(alpha=alpha, beta=beta, sigma=sigma)
+    num, den = _mu2_terms(*_arrays(alpha, beta, sigma))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return den / num
+        return _checked(symbolic, den / num, f"mu1 has no finite value: {_POLE}")
 
 
 def mv_multiplier(alpha: Scalar, beta: Scalar, sigma: np.ndarray) -> Scalar:
@@ -57,12 +89,24 @@ def mv_multiplier(alpha: Scalar, beta: Scalar, sigma: np.ndarray) -> Scalar:
     of the vertex becomes a valley. Holding the sign of this multiplier holds the vertex's MV
     assignment. ``sigma`` is numeric (the signs are data, not design variables).
     """
+    if is_casadi(sigma):
+        raise InputError("sigma of mv_multiplier must be numbers (+1 or -1), not a CasADi "
+                         "matrix: the signs are data, not design variables")
+    symbolic = check_formula_args(alpha=alpha, beta=beta, sigma=sigma)
+    alpha, beta = _arrays(alpha, beta)
     plus = (np.asarray(sigma, dtype=float) > 0).astype(float)
     if is_casadi(alpha, beta):
-        plus = ca.reshape(ca.DM(plus), *alpha.shape)
-    num, den = mu2_terms(alpha, beta, 2 * plus - 1)
+        matrix = alpha if is_casadi(alpha) else beta
+        if plus.size != matrix.numel():
+            raise InputError(f"sigma of mv_multiplier must have one sign per entry of alpha "
+                             f"({matrix.numel()}), got {plus.size}")
+        plus = ca.reshape(ca.DM(plus), *matrix.shape)
+    num, den = _mu2_terms(alpha, beta, 2 * plus - 1)
     # num / den at sigma = +1, den / num at sigma = -1: both divisors stay positive
-    return (plus * num + (1 - plus) * den) / (plus * den + (1 - plus) * num)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        value = (plus * num + (1 - plus) * den) / (plus * den + (1 - plus) * num)
+    return _checked(symbolic, value, "mv_multiplier has no finite value: the angles are "
+                                     "outside (0, pi), where its divisor vanishes")
 
 
 def fold_by_multiplier(omega: Scalar, mu: Scalar) -> Scalar:
@@ -70,6 +114,12 @@ def fold_by_multiplier(omega: Scalar, mu: Scalar) -> Scalar:
 
     Written with atan2 so omega = +-pi (folded flat) is exact: g = -sign(mu) omega there.
     """
+    symbolic = check_formula_args(omega=omega, mu=mu)
+    return _checked(symbolic, _fold_by_multiplier(*_arrays(omega, mu)), "fold_by_multiplier "
+                    "has no finite value")
+
+
+def _fold_by_multiplier(omega, mu):
     op = math_for(omega, mu)
     half = omega / 2
     return 2 * op.atan2(-op.sin(half) * _sign(mu, op), op.fabs(mu) * op.cos(half))
@@ -88,6 +138,8 @@ def gamma1_bar(omega: Scalar, alpha: Scalar, beta: Scalar, sigma: Scalar) -> Sca
 def fold_angles(omega: Scalar, alpha: Scalar, beta: Scalar,
                 sigma: Scalar) -> tuple[Scalar, Scalar, Scalar, Scalar]:
     """(gamma1, gamma2, gamma3, gamma4) at a vertex (eq:foldParams)."""
+    check_formula_args(omega=omega, alpha=alpha, beta=beta, sigma=sigma)
+    omega, sigma = _arrays(omega, sigma)
     g2 = gamma2_bar(omega, alpha, beta, sigma)
     return omega, g2, -sigma * omega, sigma * g2
 
@@ -99,6 +151,14 @@ def design_d(alpha_d: Scalar, mu_abc: Scalar) -> tuple[Scalar, Scalar]:
     u = tan(alpha_d/2), v = tan(beta_d/2) and k = (mu - 1)/(mu + 1) gives v = k/u for
     sigma_d = -1 and v = -u/k for sigma_d = +1; v > 0 whenever |mu| != 1.
     """
+    symbolic = check_formula_args(alpha_d=alpha_d, mu_abc=mu_abc)
+    with np.errstate(over="ignore"):            # mu^2 of a huge mu: outside, as it should
+        out = _design_d(*_arrays(alpha_d, mu_abc))
+    return _checked(symbolic, out, "design_d has no solution: |mu_abc| = 1 (eq:secondCheck) "
+                                   "or alpha_d a multiple of pi")
+
+
+def _design_d(alpha_d, mu_abc):
     op = math_for(alpha_d, mu_abc)
     outside = mu_abc * mu_abc > 1
     sigma_d = op.where(outside, -1.0, 1.0)
@@ -111,8 +171,14 @@ def design_d(alpha_d: Scalar, mu_abc: Scalar) -> tuple[Scalar, Scalar]:
 def panel_sides(alpha_a: Scalar, alpha_b: Scalar, alpha_c: Scalar, l_ab: Scalar,
                 l_ac: Scalar) -> tuple[Scalar, Scalar]:
     """(l_cd, l_bd) from the panel's angles and its left and bottom sides (eq:getSides)."""
-    s, cd, bd = _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
-    return cd / s, bd / s
+    symbolic = check_formula_args(alpha_a=alpha_a, alpha_b=alpha_b, alpha_c=alpha_c,
+                                  l_ab=l_ab, l_ac=l_ac)
+    s, cd, bd = _panel_side_terms(*_arrays(alpha_a, alpha_b, alpha_c, l_ab, l_ac))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sides = cd / s, bd / s
+    return _checked(symbolic, sides, "panel_sides has no finite value: alpha_a + alpha_b + "
+                                     "alpha_c is a multiple of pi (alpha_d = 0 or pi fails "
+                                     "the first check, eq:firstCheck)")
 
 
 def panel_side_residuals(alpha_a: Scalar, alpha_b: Scalar, alpha_c: Scalar, l_ab: Scalar,
@@ -125,8 +191,15 @@ def panel_side_residuals(alpha_a: Scalar, alpha_b: Scalar, alpha_c: Scalar, l_ab
     iterate of the simultaneous transcription can make a panel thin (alpha_d near 0 or pi),
     where the quotient and its derivatives grow like 1 / s and 1 / s^2.
     """
+    symbolic = check_formula_args(alpha_a=alpha_a, alpha_b=alpha_b, alpha_c=alpha_c,
+                                  l_ab=l_ab, l_ac=l_ac, l_cd=l_cd, l_bd=l_bd)
+    alpha_a, alpha_b, alpha_c, l_ab, l_ac, l_cd, l_bd = _arrays(
+        alpha_a, alpha_b, alpha_c, l_ab, l_ac, l_cd, l_bd)
     s, cd, bd = _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac)
-    return s * l_cd - cd, s * l_bd - bd
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = s * l_cd - cd, s * l_bd - bd
+    return _checked(symbolic, out, "panel_side_residuals overflow: the lengths are too large "
+                                   "for floating point")
 
 
 def _panel_side_terms(alpha_a, alpha_b, alpha_c, l_ab, l_ac):

@@ -1,11 +1,16 @@
-"""backend: one NumPy/CasADi dispatch for the formulas written once for both."""
+"""backend: one NumPy/CasADi dispatch for the formulas written once for both, and the checks
+of the public functions' numeric arguments and results."""
 
 import casadi as ca
 import numpy as np
 import pytest
 
 from rffqm_nlp import shape, surfaces, vertex
-from rffqm_nlp.backend import CASADI, NUMPY, is_casadi, math_for
+from rffqm_nlp.backend import (CASADI, NUMPY, check_argument, check_formula_args,
+                               describe_argument, finite_array, finite_result, is_casadi,
+                               math_for)
+from rffqm_nlp.errors import InputError, SurfaceError
+from rffqm_nlp.files import Key
 
 
 @pytest.mark.parametrize("args", [
@@ -62,3 +67,66 @@ def test_vertex_and_shape_dispatch_through_it():
     forms = ca.Function("f", comps, list(shape.fundamental_forms(comps)))
     for got, want in zip(forms(*(P[..., k] for k in range(3))), shape.fundamental_forms(P)):
         np.testing.assert_allclose(got.full(), want, rtol=1e-14)
+
+
+# --------------------------------------------------------------------------- argument checks
+@pytest.mark.parametrize("value, kwargs, words", [
+    ("abc", {}, "x must be a finite number or an array of finite numbers, got the string 'abc'"),
+    (None, {}, "got None"), ({"a": 1}, {}, "got a table"), (True, {}, "got booleans"),
+    ([1.0, "a"], {}, "got a list of 2 items holding something other than numbers"),
+    ([[1.0], [1.0, 2.0]], {}, "got a ragged or mixed list"), (1 + 2j, {}, "complex numbers"),
+    ([10**400], {}, "too large for a float"), (np.array([1.0, np.inf]), {}, "got inf at index "
+                                                                              "(1,)"),
+    (np.zeros((2, 3)), {"shape": (None, 3, 3)}, "of shape (n, 3, 3), got shape (2, 3)"),
+    (np.zeros(0), {"least": 1}, "with at least 1 entry, got shape (0,)"),
+    (np.zeros(3), {"ndim": 2}, "a 2-D array of finite numbers, got shape (3,)"),
+    (ca.SX.sym("x"), {}, "got a SX"),
+])
+def test_finite_array_refuses_in_one_line_naming_the_argument(value, kwargs, words):
+    with pytest.raises(InputError) as exc:
+        finite_array(value, "x", **kwargs)
+    assert words in str(exc.value) and str(exc.value).startswith("x must be")
+
+
+def test_finite_array_copies_and_lets_nan_through_on_request():
+    src = np.array([1, 2], dtype=np.int32)
+    out = finite_array(src, "x")
+    assert out.dtype == float and out is not src
+    assert np.isnan(finite_array([np.nan], "x", finite=False)[0])
+    with pytest.raises(SurfaceError):
+        finite_array("a", "u", error=SurfaceError)
+    with pytest.raises(InputError, match="takes shape as a tuple"):
+        finite_array(1.0, "x", shape=3)
+
+
+def test_formula_arguments_and_results():
+    """check_formula_args says whether a graph is built and refuses numeric arguments that
+    are not finite, broadcasting numbers (sigma +1 or -1); finite_result refuses NaN."""
+    assert check_formula_args(alpha=1.0, sigma=np.array([1.0, -1.0])) is False
+    assert check_formula_args(alpha=ca.SX.sym("a"), sigma=1.0) is True
+    for kwargs, words in (({"sigma": 0.5}, r"sigma must be \+1 or -1"),
+                          ({"alpha": ca.SX.sym("a"), "sigma": "a"}, "sigma must be"),
+                          ({"alpha": "a"}, "alpha must be"),
+                          ({"alpha": np.ones(2), "beta": np.ones(3)}, "must broadcast")):
+        with pytest.raises(InputError, match=words):
+            check_formula_args(**kwargs)
+    value = (1.0, np.ones(2))
+    assert finite_result(value, "never") is value
+    with pytest.raises(InputError, match="^the reason$"):
+        finite_result((1.0, np.array([np.nan])), "the reason")
+    with pytest.raises(InputError, match="checks numbers"):
+        finite_result("text", "x")
+
+
+def test_check_argument_takes_numpy_scalars_and_refuses_unprintable_integers():
+    """The API's wrapper of files.check_value: a 0-d array is its number; a whole number
+    too long for Python to print is refused by its size instead of raising ValueError."""
+    assert check_argument(np.array(3), Key("whole", low=1), "n") == 3
+    assert check_argument(np.float64(0.5), Key("number"), "x") == 0.5
+    with pytest.raises(InputError, match=r"^n must be a whole number >= 1, got a whole number "
+                                         r"of more than 4300 digits"):
+        check_argument(-10**5000, Key("whole", low=1), "n")
+    with pytest.raises(InputError, match="key must be a rffqm_nlp.files.Key"):
+        check_argument(1, None, "n")
+    assert describe_argument(np.array(2.5)) == "the number 2.5"
+    assert describe_argument(10**5000) == "a whole number of more than 4300 digits"

@@ -496,3 +496,62 @@ def test_tiles_only_where_the_global_reaches_are_far(monkeypatch):
     monkeypatch.setattr(collisions_module, "TILE_REACH", 0.0)
     coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), 0.0)
     assert len(calls) == len(omegas) - 1
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda pat: collisions(pat.boundary, 1.0), "^pattern must be a crease pattern .*got a "
+                                                "BoundaryData"),
+    (lambda pat: collisions(pat, [1.0, 2.0]), r"^omega_max must be a single number in \[-pi, "
+                                              r"pi\], got a list of 2 numbers"),
+    (lambda pat: collisions(pat, "1"), "^omega_max must be a number"),
+    (lambda pat: collisions(pat, 1.0, clearance=-1.0), "^clearance must be a finite number >= 0"),
+    (lambda pat: collisions(pat, 1.0, tol=np.nan), "^tol must be a finite number > 0"),
+    (lambda pat: triangle_distance(np.zeros((2, 3, 3)), np.zeros((1, 3, 3))),
+     r"^B must be triangles \(2, 3, 3\)"),
+    (lambda pat: triangles_intersect(np.zeros((1, 3, 3)), np.zeros((1, 3, 3)), scale=0),
+     "^scale must be a finite number > 0"),
+    (lambda pat: collisions_module.near_pairs(pat, np.zeros((2, 2, 3)), 1.0),
+     r"^Y must be an array of finite numbers of shape \(3, 4, 3\)"),
+    (lambda pat: panel_distance(None, np.zeros((1, 12, 3)), [0], [0], [1]),
+     r"^geo must be the crease pattern \(rffqm_nlp.Pattern\) of the states"),
+    (lambda pat: panel_distance(pat, np.zeros((1, 12, 3)), [0], [0], [6]),
+     r"^q must be a 1-D array of whole numbers in \[0, 6\)"),
+])
+def test_bad_arguments_are_refused_in_one_line(call, words):
+    pat = nm.march(rq.miura_boundary(2, 3))
+    with pytest.raises(InputError, match=words) as exc:
+        call(pat)
+    assert "\n" not in str(exc.value)
+
+
+def test_degenerate_triangles_have_no_distance_here():
+    """Triangles whose corners lie on a line give no finite distance here: refused, not
+    NaN; proper ones keep theirs."""
+    line = np.array([[[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]])
+    tri = np.array([[[0.0, 0, 1], [1, 0, 1], [0, 1, 1]]])
+    assert triangle_distance(tri, tri + [0, 0, 2.0])[0] == pytest.approx(2.0)
+    try:
+        d = triangle_distance(line, tri)
+    except InputError as exc:
+        assert "degenerate" in str(exc)
+    else:
+        assert np.all(np.isfinite(d))
+
+
+
+def test_clearance_helpers_refuse_bad_arguments():
+    clearance = importlib.import_module("rffqm_nlp.clearance")
+    pat = nm.march(rq.miura_boundary(2, 3))
+    for call, words in (
+            (lambda: clearance.closest(pat, [1.0, 2.0], 0.1), "^omega must be a single number"),
+            (lambda: clearance.closest(pat, 1.0, -0.1), "^clearance must be a finite number"),
+            (lambda: clearance.closest(pat.boundary, 1.0, 0.1), "^pattern must be a crease"),
+            (lambda: clearance.panel_corners(0, 3), r"^N must be a whole number in \[1, "),
+            (lambda: clearance.choose_axis(np.zeros((3, 3)), np.zeros((4, 3))),
+             r"^P must be the corners \(4, 3\) of a panel"),
+            (lambda: clearance.constrain(None, pat, 1.0, [[0, 1]], 0.1), "^nlp must be the "
+                                                                         "design's NLP")):
+        with pytest.raises(InputError, match=words):
+            call()
+    pairs, worst = clearance.closest(pat, 1.0, 0.01)
+    assert pairs.shape[1] == 2 and (worst.pair is None) == (len(pairs) == 0)

@@ -77,6 +77,27 @@ def test_mismatched_lattices_are_refused(cap):
         curvature_maps(cap.lattice(4, 4), cap.lattice(4, 6), cap)
 
 
+def test_degenerate_lattices_and_wrong_arguments_are_refused_not_nan(cap):
+    """A lattice with no finite curvature (all one point, rows shrunk to points) is an
+    InputError, never NaN maps; so are arguments of the wrong kind."""
+    T = cap.lattice(4, 4)
+    folded = np.repeat(T[:, :1], T.shape[1], axis=1)    # each row one point: r_v = 0
+    for call, words in (
+            (lambda: lattice_curvatures(np.zeros((4, 4, 3))), "no finite value"),
+            (lambda: curvature_maps(folded, T, cap), "no finite value"),
+            (lambda: lattice_curvatures(T, orient=np.ones((2, 3, 3))),
+             r"^orient must be an array of finite numbers of shape \(3, 3, 3\)"),
+            (lambda: lattice_curvatures("T"), "^P must be an array of finite numbers of shape "
+                                              r"\(n, m, 3\)"),
+            (lambda: curvature_maps(T, T, "sphere_cap"), "^target must be a surface"),
+            (lambda: curvature_maps(T, np.where(T > 0, np.nan, T), cap),
+             "^target_points must be")):
+        with pytest.raises(rq.InputError, match=words):
+            call()
+    maps = curvature_maps(T + 0.01, T, cap)
+    assert all(np.all(np.isfinite(v)) for v in maps.to_dict().values())
+
+
 def test_curvature_png_is_written_and_not_blank(designed, tmp_path):
     path = viz.plot_curvature(designed.curvature, tmp_path / "curvature.png")
     image = imread(path)

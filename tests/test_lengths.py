@@ -6,6 +6,7 @@ import pytest
 from scipy.optimize import linprog
 
 import rffqm_nlp as rq
+from rffqm_nlp import lengths
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
 from rffqm_nlp.lengths import length_maps, length_spread, side_length_lp, side_length_nlp
 from rffqm_nlp.marching import march, pattern_function
@@ -84,10 +85,40 @@ def test_lp_is_eq_linearP_shifted_by_delta(seed):
 
 
 @pytest.mark.parametrize("kwargs", [{"eps": 0.0}, {"eps": -1.0}, {"eps": float("nan")},
-                                    {"delta": 0.0}, {"delta": -1.0}, {"delta": float("nan")}])
+                                    {"delta": 0.0}, {"delta": -1.0}, {"delta": float("nan")},
+                                    {"eps": "small"}, {"delta": "small"}, {"eps": [0.1]},
+                                    {"eps": None}, {"delta": True}])
 def test_lp_invalid_arguments(kwargs):
-    with pytest.raises(InputError, match=next(iter(kwargs))):
+    with pytest.raises(InputError, match=f"^{next(iter(kwargs))} must"):
         side_length_lp(fig_random(0, n=4), **kwargs)
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: side_length_lp(march(rq.miura_boundary(2, 2))), "^bd must be boundary data"),
+    (lambda: lengths.length_maps(None), "^bd must be boundary data"),
+    (lambda: lengths.memory_estimate(2, 2, "qp"), "^program must be one of 'lp', 'nlp'"),
+    (lambda: lengths.memory_estimate(-2, 2, "lp"), r"^N must be a whole number in \[1, "),
+    (lambda: lengths.check_memory(rq.miura_boundary(2, 2), "lp", 5), "^name must be a string"),
+    (lambda: lengths.length_spread([], []), "^length_spread needs at least one side"),
+    (lambda: lengths.length_spread([1.0, 0.0], [1.0]), "the smallest 0"),
+    (lambda: lengths.length_spread([1.0, np.nan], [1.0]), "^lh must be .* got nan"),
+    (lambda: lengths.length_spread("ab", [1.0]), "^lh must be a finite number or an array"),
+    (lambda: lengths.LengthMaps(np.zeros((3, 2, 5)), np.zeros((2, 3, 5))), "^Lh must be an "
+                                                                            r"\(N\+1, M, N\+M\)"),
+    (lambda: side_length_nlp(rq.miura_boundary(2, 2), verbose="yes"), "^verbose must be true "
+                                                                       "or false"),
+])
+def test_length_functions_refuse_bad_arguments_in_one_line(call, words):
+    with pytest.raises(InputError, match=words) as exc:
+        call()
+    assert "\n" not in str(exc.value)
+
+
+def test_length_spread_of_a_pattern_is_finite():
+    pat = march(rq.miura_boundary(2, 3, a=1.0, b=2.0))
+    spread = lengths.length_spread(pat.lh, pat.lv)
+    assert spread["max_over_min"] == pytest.approx(2.0) and all(map(np.isfinite,
+                                                                    spread.values()))
 
 
 # --------------------------------------------------------------------------- NLP

@@ -335,6 +335,165 @@ def test_miura_boundary_rejects_bad_parameters():
         rq.miura_boundary(0, 2)
 
 
+@pytest.mark.parametrize("call, words", [
+    (lambda: rq.miura_boundary(2, np.nan), "M must be a whole number in [1, 100000] (panels), "
+                                           "got the number nan"),
+    (lambda: rq.miura_boundary(2.0, 2), "N must be a whole number in [1, 100000] (panels), got "
+                                        "the number 2"),
+    (lambda: rq.miura_boundary(10**30, 2), "got a whole number of 31 digits"),
+    (lambda: rq.miura_boundary(None, 2), "N must be a whole number"),
+    (lambda: rq.miura_boundary(2, 2, a="1"), "a must be a finite number > 0 (a length), got "
+                                             "the string '1'"),
+    (lambda: rq.miura_boundary(2, 2, alpha0=np.array([1.0, 1.1])), "alpha0 must be a finite "
+                                                                    "number in (0, 1.5708)"),
+    (lambda: rq.miura_boundary(2, 2, layout=5), "layout must be one of 'zigzag_j', 'zigzag_i'"),
+    (lambda: rq.perturb_angles(rq.miura_boundary(2, 2), 0.1, seed=-1),
+     "seed must be a whole number in [0, 9.22337e+18] (or None), got the whole number -1"),
+    (lambda: rq.perturb_angles(rq.miura_boundary(2, 2), 0.1, seed=1.5), "seed must be a whole"),
+    (lambda: rq.perturb_angles(rq.miura_boundary(2, 2), "wide"), "amplitude must be a finite "
+                                                                 "number >= 0"),
+    (lambda: rq.perturb_angles(rq.numpy_model.march(rq.miura_boundary(2, 2)), 0.1),
+     "bd must be boundary data (rffqm_nlp.BoundaryData, e.g. from miura_boundary), got a "
+     "Pattern"),
+    (lambda: rq.boundary.refine(None, rq.miura_boundary(2, 2), rq.miura_boundary(2, 2)),
+     "design must be boundary data"),
+    (lambda: rq.boundary.mv_set("a", 1.0), "alpha must be a finite number"),
+    (lambda: rq.BoundaryData(left="rm -rf", bottom=[], l_left=[], l_bottom=[]),
+     "left must be an array of numbers, got a string of 6 characters"),
+    (lambda: rq.BoundaryData.from_dict([1, 2]), "boundary data must be a table"),
+    (lambda: rq.miura_boundary(2, 2).with_lengths([1.0, np.nan, 1.0, 1.0]),
+     "lengths must be N + M = 4 finite positive lengths, got nan at index (1,)"),
+    (lambda: rq.BoundaryData.from_vector(np.ones(3), np.ones(5), 2, 2), "x must be a design "
+                                                                        "vector of 14"),
+])
+def test_boundary_functions_name_the_argument_and_what_it_allows(call, words):
+    with pytest.raises(rq.InputError) as exc:
+        call()
+    assert words in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_perturb_angles_keeps_taking_generators_and_none():
+    bd = rq.miura_boundary(2, 2)
+    same = [rq.perturb_angles(bd, 0.01, seed=s) for s in (np.random.default_rng(4), 4)]
+    np.testing.assert_array_equal(same[0].left, same[1].left)
+    assert rq.perturb_angles(bd, 0.01).N == 2
+    assert rq.perturb_angles(bd, 0.01, seed=np.int64(7)).N == 2
+
+
+def test_march_and_fold_refuse_the_wrong_objects_and_unfoldable_patterns():
+    bd = rq.miura_boundary(2, 2)
+    pat = mg.march(bd)
+    for model in (mg, numpy_model):
+        with pytest.raises(rq.InputError, match="^bd must be boundary data .* got a Pattern"):
+            model.march(pat)
+        with pytest.raises(rq.InputError, match="^pat must be a crease pattern .*march it "
+                                                "first"):
+            model.fold(bd, 1.0)
+    beta = pat.beta.copy()
+    beta[0, 0] = pat.alpha[0, 0]                 # alpha = beta with sigma = +1: not in MV
+    broken = rq.Pattern(pat.alpha, beta, np.ones_like(pat.sigma), pat.lh, pat.lv, pat.mu,
+                        pat.X)
+    for fold in (mg.fold, numpy_model.fold, mg.fold_angles, numpy_model.fold_angles):
+        with pytest.raises(rq.InputError, match="no finite folded state"):
+            fold(broken, 1.0)
+    with pytest.raises(rq.InputError, match="^omega must be a single number"):
+        mg.fold_angles(pat, [0.1, 0.2])
+
+
+def test_the_graph_sizes_are_checked_before_any_graph_is_built():
+    for make in (mg.pattern_function, mg.fold_function, mg.folded_function,
+                 mg.marched_function, mg.panel_quaternions_function):
+        for N, M in ((0, 2), (2, -1), (2.0, 2), (10**6, 2), ("2", 2)):
+            with pytest.raises(rq.InputError, match="must be a whole number in"):
+                make(N, M)
+    assert mg.pattern_function(2, 3) is mg.pattern_function(np.int64(2), 3)   # one cache
+
+
+def test_evaluation_checks_its_inputs_and_never_writes_into_them():
+    """The buffer is only pointed at vectors of the input's size (a shorter one would be
+    read past its end), and set() writes into the Evaluation's own copy."""
+    bd = rq.miura_boundary(2, 2)
+    f = mg.pattern_function(2, 2)
+    args = mg.boundary_inputs(bd)
+    for bad, words in ((args[:3], "args must be a list of 4 arrays"),
+                       ([np.zeros(2)] + args[1:], "input left of pattern must have 9 entries"),
+                       (["abc"] + args[1:], "input left of pattern must be an array of 9"),
+                       ("abcd", "args must be a list of 4 arrays")):
+        with pytest.raises(rq.InputError, match=words):
+            mg.Evaluation(f, bad)
+    with pytest.raises(rq.InputError, match="f must be a CasADi Function"):
+        mg.evaluate(lambda x: x, args)
+    mine = np.array(args[2])                   # l_left, writable
+    ev = mg.Evaluation(f, [args[0], args[1], mine, args[3]])
+    ev.set(2, np.full(2, 2.0))
+    np.testing.assert_array_equal(mine, args[2])
+    np.testing.assert_allclose(ev.run()[4][:, 0], 2.0)       # lv's first column: l_left
+    for k, value in ((4, 1.0), (-1, 1.0), (2, np.ones(3)), (2.0, np.ones(2))):
+        with pytest.raises(rq.InputError):
+            ev.set(k, value)
+
+
+def test_locate_failure_checks_the_shapes_and_keeps_nan_a_failure():
+    ok = (np.ones((2, 2)), np.full((2, 2), 3.0), np.ones((3, 2)), np.ones((2, 3)))
+    assert mg.locate_failure(*ok) is None
+    nan_mu = (ok[0], np.where(np.eye(2) > 0, np.nan, 3.0), ok[2], ok[3])
+    assert mg.locate_failure(*nan_mu) == ("second", (1, 1))
+    with pytest.raises(rq.InputError, match=r"lv must be an \(2, 3\) array"):
+        mg.locate_failure(ok[0], ok[1], ok[2], np.ones((2, 2)))
+
+
+def test_graph_builders_take_numbers_and_refuse_mismatched_shapes():
+    """On numbers the graph builders give DMs equal to their graphs' values; matrices of
+    the wrong shapes and non-numbers are InputErrors, not CasADi assertions."""
+    pat = mg.march(rq.miura_boundary(2, 3))
+    A = ca.MX.sym("A", 3, 4)
+    B = ca.MX.sym("B", 3, 4)
+    graph = ca.Function("e", [A, B], [mg.edge_directions(A, B)])
+    np.testing.assert_allclose(mg.edge_directions(pat.alpha, pat.beta).full(),
+                               graph(pat.alpha, pat.beta).full(), rtol=1e-14)
+    kh, kv = mg.fold_multipliers(pat.alpha, pat.beta, pat.sigma)
+    assert np.all(np.isfinite(kh.full())) and kv.shape == (3, 4)
+    w, x, y, z = mg.qmul((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0))
+    assert [float(c) for c in (w, x, y, z)] == [0.0, 1.0, 0.0, 0.0]
+    for call, words in (
+            (lambda: mg.edge_directions(np.ones((3, 3)), np.ones((2, 3))), "one shape"),
+            (lambda: mg.fold_multipliers(pat.alpha, pat.beta, "x"), "sigma must be"),
+            (lambda: mg.qmul((1.0, 0.0), (1.0, 0.0, 0.0, 0.0)), "p must be a quaternion"),
+            (lambda: mg.crease_quaternion(np.ones(2), np.ones(3), 1.0, 0.0),
+             "numbers or matrices of one shape"),
+            (lambda: mg.crease_quaternions(pat.alpha, pat.beta, pat.sigma, np.zeros((3, 4)),
+                                           [1.0, 2.0]), "omega must be a number"),
+            (lambda: mg.rotated_edges((np.ones((2, 3)),) * 4, pat.alpha, np.zeros((3, 4)),
+                                      pat.lh, pat.lv[:, :2]), "lv must be 2 x 4")):
+        with pytest.raises(rq.InputError, match=words):
+            call()
+
+
+def test_vertex_formulas_refuse_poles_on_numbers_and_build_graphs_on_symbols():
+    """A multiplier at its pole (sigma outside MV(alpha, beta)) is an InputError on
+    numbers, never inf; on symbols the formulas build their graphs as before."""
+    for f, args in ((vx.mu1, (1.0, 1.0, 1.0)),              # 1 / mu2^{+1}(a, a) = 1 / 0
+                    (numpy_model.mu1, (1.0, np.pi - 1.0, -1.0)),
+                    (numpy_model.mu2, (1.0, 1.0, 1.0)),     # the printed form: 0 / 0
+                    (vx.mu2, (0.0, 0.0, 1.0))):
+        with pytest.raises(rq.InputError, match="sigma is not in MV"):
+            f(*args)
+    with pytest.raises(rq.InputError, match="multiple of pi"):
+        vx.panel_sides(0.0, 0.0, 0.0, 1.0, 1.0)      # sin(0) = 0 exactly
+    with pytest.raises(rq.InputError, match=r"\|mu_abc\| = 1"):
+        vx.design_d(0.0, 1.0)
+    for bad, words in (("a", "alpha must be a finite number"), (np.nan, "got nan"),
+                       ([1.0, 2.0, 3.0], "must broadcast together")):
+        with pytest.raises(rq.InputError, match=words):
+            vx.mu2(bad, np.ones(2), 1.0)
+    with pytest.raises(rq.InputError, match="sigma must be \\+1 or -1"):
+        vx.gamma2_bar(0.3, 1.0, 1.2, 0.5)
+    a = ca.SX.sym("a")
+    mu = ca.Function("mu", [a], [vx.mu2(a, 1.2, -1.0)])
+    assert float(mu(1.0)) == pytest.approx(vx.mu2(1.0, 1.2, -1.0), rel=1e-14)
+    assert vx.mu2([1.0, 1.1], 1.2, -1.0).shape == (2,)        # lists are arrays
+
+
 @pytest.mark.parametrize("N, M, seed", [(1, 1, 0), (3, 5, 1), (6, 4, 2)])
 def test_marched_function_is_the_march_then_the_fold(N, M, seed):
     """One Function for the march and the kinematics: the same values as pattern_function,

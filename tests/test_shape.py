@@ -125,6 +125,37 @@ def test_bad_lattices_raise_input_error():
         sh.coarse_grain([np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 4))])
 
 
+@pytest.mark.parametrize("call, words", [
+    (lambda: sh.fundamental_forms(np.zeros((3, 3, 3))), "^fundamental_forms has no finite "
+                                                         "value: the lattice is degenerate"),
+    (lambda: sh.fundamental_forms(random_lattice(), hu=0.0), r"^hu must be a finite number > 0"),
+    (lambda: sh.fundamental_forms(random_lattice(), hv="1"), r"^hv must be a finite number > 0"),
+    (lambda: sh.coarse_grain(np.full((3, 3, 3), np.nan)), "^the lattice must be an .* got nan"),
+    (lambda: sh.coarse_grain(None), "^a lattice must be an .* got None"),
+    (lambda: sh.kabsch(np.zeros((0, 3)), np.zeros((0, 3))), r"^P must be finite points .* at "
+                                                            r"least one, got shape \(0, 3\)"),
+    (lambda: sh.kabsch("points", np.zeros((2, 3))), "^P must be finite points"),
+    (lambda: sh.kabsch(np.full((2, 3), 1e200) * [[1], [-1]], np.zeros((2, 3))),
+     "^kabsch: the points are too large"),
+    (lambda: sh.kabsch(np.eye(3), np.eye(3), reflection="yes"), "^reflection must be true"),
+    (lambda: sh.rms_distance(np.full((1, 3), 1e300), np.full((1, 3), -1e300)),
+     "^the distances overflow"),
+    (lambda: sh.hausdorff_distance(np.zeros((0, 3)), np.zeros((2, 3))), "^points must be"),
+    (lambda: sh.lattice_area(np.full((2, 2, 3), 1e200) * np.arange(2)[:, None, None]),
+     "^lattice_area overflows"),
+    (lambda: sh.surface_area("sphere_cap"), "^target must be a surface"),
+    (lambda: sh.shape_fit(np.zeros((3, 3, 3)), None), "^target must be a surface"),
+    (lambda: sh.distances_to(np.zeros((2, 3)), {"points": 1}), "^target points must be"),
+])
+def test_shape_measures_refuse_bad_arguments_and_non_finite_results(call, words):
+    """No shape measure returns NaN or infinity: a degenerate lattice, an empty point set
+    or coordinates whose products overflow are InputErrors (SurfaceError for a target that
+    is no surface), in one line."""
+    with pytest.raises(InputError, match=words) as exc:
+        call()
+    assert "\n" not in str(exc.value)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_kabsch_recovers_rotation_and_reflection(seed):
     rng = np.random.default_rng(seed)
