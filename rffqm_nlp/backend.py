@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import InputError
-from .files import Key, check_value, describe_value
+from .files import describe_value
 
 #: A value the formulas written once for both take and return: a Python or NumPy number, a
 #: NumPy array, or a CasADi SX/MX symbol or DM matrix.
@@ -58,47 +58,10 @@ def math_for(*args: Any) -> SimpleNamespace:
 
 
 # --------------------------------------------------------------------------- arguments
-#: Python refuses to print whole numbers of more digits than this (sys.int_info).
-_INT_DIGITS = 4300
-#: No key given to :func:`_check_helper_args`.
-_NO_KEY = object()
-
-
-def _check_helper_args(key: Any = _NO_KEY, error: Any = InputError) -> None:
-    """The checker's own arguments: a :class:`~rffqm_nlp.files.Key` and an error class."""
-    if key is not _NO_KEY and not isinstance(key, Key):
-        raise InputError(f"key must be a rffqm_nlp.files.Key, got {describe_argument(key)}")
+def _check_error_class(error: Any) -> None:
+    """The checker's own argument: InputError or one of its subclasses."""
     if not (isinstance(error, type) and issubclass(error, InputError)):
         raise InputError("error must be InputError or one of its subclasses")
-
-
-def describe_argument(value: Any) -> str:
-    """:func:`rffqm_nlp.files.describe_value` (a value's kind, never its content) for any
-    value a caller of the API passes: a 0-d NumPy array as the value it holds, a whole
-    number too long for Python to print by its size."""
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
-    if (isinstance(value, int) and not isinstance(value, bool)
-            and abs(value).bit_length() > 3.3 * _INT_DIGITS):
-        return f"a whole number of more than {_INT_DIGITS} digits"
-    return describe_value(value)
-
-
-def check_argument(value: Any, key: Key, name: str,
-                   error: type[InputError] = InputError) -> Any:
-    """A public function's argument checked by THE validator,
-    :func:`rffqm_nlp.files.check_value` (``key`` says what is allowed), for values a caller
-    of the API passes that a file cannot hold: a 0-d NumPy array is taken as the number or
-    string it holds, and a whole number too long for Python to print is refused by its
-    size (describing it would raise)."""
-    _check_helper_args(key=key, error=error)
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
-    if (isinstance(value, int) and not isinstance(value, bool)
-            and abs(value).bit_length() > 3.3 * _INT_DIGITS):
-        raise error(f"{name} must be {key.allowed()}, got a whole number of more than "
-                    f"{_INT_DIGITS} digits")
-    return check_value(value, key, name, error)
 
 
 def finite_array(value: Any, name: str, *, shape: tuple[int | None, ...] | None = None,
@@ -112,7 +75,7 @@ def finite_array(value: Any, name: str, *, shape: tuple[int | None, ...] | None 
     strings, None, mappings, ragged lists, complex and object arrays, NaN and infinity. A
     value is never quoted, only its kind (:func:`rffqm_nlp.files.describe_value`).
     ``finite=False`` lets NaN and infinity through (where they carry a meaning)."""
-    _check_helper_args(error=error)
+    _check_error_class(error)
     if not (shape is None or (isinstance(shape, tuple) and all(
             s is None or (isinstance(s, int) and not isinstance(s, bool) and s >= 0)
             for s in shape))) or not (ndim is None or type(ndim) is int) \
@@ -121,15 +84,15 @@ def finite_array(value: Any, name: str, *, shape: tuple[int | None, ...] | None 
                          "and least as whole numbers")
     what = allowed or _array_words(shape, ndim)
     if isinstance(value, (str, bytes, Mapping)) or value is None or is_casadi(value):
-        raise error(f"{name} must be {what}, got {describe_argument(value)}")
+        raise error(f"{name} must be {what}, got {describe_value(value)}")
     try:
         raw = np.asarray(value)
     except (ValueError, TypeError, OverflowError, RecursionError):
         raise error(f"{name} must be {what}, got a ragged or mixed list") from None
     if raw.dtype.kind not in "iuf":
         got = ("booleans" if raw.dtype.kind == "b" else "complex numbers"
-               if raw.dtype.kind == "c" else describe_argument(value) if raw.ndim == 0
-               else f"{describe_argument(value)} holding something other than numbers (or a "
+               if raw.dtype.kind == "c" else describe_value(value) if raw.ndim == 0
+               else f"{describe_value(value)} holding something other than numbers (or a "
                "whole number too large for a float)")
         raise error(f"{name} must be {what}, got {got}")
     if shape is not None and (raw.ndim != len(shape) or any(
@@ -196,7 +159,7 @@ def finite_result(value: Any, what: str) -> Any:
             finite = np.all(np.isfinite(part))
         except (TypeError, ValueError):
             raise InputError(f"finite_result checks numbers and arrays of numbers, got "
-                             f"{describe_argument(part)}") from None
+                             f"{describe_value(part)}") from None
         if not finite:
             raise InputError(what)
     return value

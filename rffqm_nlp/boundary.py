@@ -20,9 +20,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .backend import check_argument, describe_argument, finite_array
+from .backend import finite_array
 from .errors import BoundaryDataError, InputError
-from .files import Key
+from .files import Key, check_value, describe_value
 
 Layout = Literal["zigzag_j", "zigzag_i"]
 LAYOUTS: tuple[str, ...] = ("zigzag_j", "zigzag_i")
@@ -48,7 +48,7 @@ _LAYOUT = Key("choice", choices=LAYOUTS)
 def check_size(N: Any, M: Any) -> tuple[int, int]:
     """(N, M), a pattern's panel rows and columns, checked: whole numbers in
     [1, :data:`MAX_SIDE`]; else one :class:`InputError` line naming N or M."""
-    return check_argument(N, _SIDE, "N"), check_argument(M, _SIDE, "M")
+    return check_value(N, _SIDE, "N"), check_value(M, _SIDE, "M")
 
 
 def check_boundary(bd: Any, name: str = "bd") -> "BoundaryData":
@@ -56,7 +56,7 @@ def check_boundary(bd: Any, name: str = "bd") -> "BoundaryData":
     and what it got (a Pattern, a dict, ...)."""
     if not isinstance(bd, BoundaryData):
         raise InputError(f"{name} must be boundary data (rffqm_nlp.BoundaryData, e.g. from "
-                         f"miura_boundary), got {describe_argument(bd)}")
+                         f"miura_boundary), got {describe_value(bd)}")
     return bd
 
 
@@ -64,9 +64,9 @@ def mv_set(alpha: float, beta: float, tol: float = MV_TOL) -> tuple[int, ...]:
     """The admissible mountain-valley signs MV(alpha, beta) of Theorem 2.1 (eq:foldParams).
 
     ``alpha``, ``beta`` finite numbers (radians), ``tol`` >= 0; else :class:`InputError`."""
-    alpha = check_argument(alpha, _ANGLE, "alpha")
-    beta = check_argument(beta, _ANGLE, "beta")
-    tol = check_argument(tol, Key("number", low=0.0), "tol")
+    alpha = check_value(alpha, _ANGLE, "alpha")
+    beta = check_value(beta, _ANGLE, "beta")
+    tol = check_value(tol, Key("number", low=0.0), "tol")
     return _mv_set(alpha, beta, tol)
 
 
@@ -171,7 +171,7 @@ class BoundaryData:
         """Inverse of :meth:`to_dict`."""
         if not isinstance(d, Mapping):
             raise InputError(f"boundary data must be a table of left, bottom, l_left and "
-                             f"l_bottom, got {describe_argument(d)}")
+                             f"l_bottom, got {describe_value(d)}")
         fields = ("left", "bottom", "l_left", "l_bottom")
         for k in fields:
             if k not in d:
@@ -183,7 +183,7 @@ def _as_float_array(x, name: str) -> np.ndarray:
     """``x`` as a (new) float array of real numbers (NaN and infinity pass: the vertex
     and side checks name them where they are)."""
     if isinstance(x, (str, bytes, Mapping)) or x is None:
-        raise InputError(f"{name} must be an array of numbers, got {describe_argument(x)}")
+        raise InputError(f"{name} must be an array of numbers, got {describe_value(x)}")
     try:
         raw = np.asarray(x)
     except (TypeError, ValueError, OverflowError, RecursionError):
@@ -191,7 +191,7 @@ def _as_float_array(x, name: str) -> np.ndarray:
                          "list") from None
     if raw.dtype.kind not in "iuf":
         raise InputError(f"{name} must be an array of numbers, got "
-                         f"{'booleans' if raw.dtype.kind == 'b' else describe_argument(x)}")
+                         f"{'booleans' if raw.dtype.kind == 'b' else describe_value(x)}")
     return np.array(raw, dtype=float)
 
 
@@ -217,10 +217,10 @@ def _check_vertex(vertex: tuple[int, int], a: float, b: float, s: float) -> None
 
 def miura_vertex(i: int, j: int, alpha0: float, layout: Layout) -> tuple[float, float, float]:
     """(alpha, beta, sigma) of vertex (i, j) (1-based) of a Miura-ori (docs/paper.md s.6)."""
-    check_argument(i, Key("whole", low=1), "i")
-    check_argument(j, Key("whole", low=1), "j")
-    alpha0 = check_argument(alpha0, _ACUTE, "alpha0")
-    layout = check_argument(layout, _LAYOUT, "layout")
+    check_value(i, Key("whole", low=1), "i")
+    check_value(j, Key("whole", low=1), "j")
+    alpha0 = check_value(alpha0, _ACUTE, "alpha0")
+    layout = check_value(layout, _LAYOUT, "layout")
     return _miura_vertex(i, j, alpha0, layout)
 
 
@@ -244,9 +244,9 @@ def miura_boundary(N: int, M: int, a: float = 1.0, b: float = 1.0, alpha0: float
     alpha0 in (0, pi/2); anything else raises :class:`InputError` naming the argument.
     """
     N, M = check_size(N, M)
-    alpha0 = check_argument(alpha0, _ACUTE, "alpha0")
-    a, b = check_argument(a, _LENGTH, "a"), check_argument(b, _LENGTH, "b")
-    layout = check_argument(layout, _LAYOUT, "layout")
+    alpha0 = check_value(alpha0, _ACUTE, "alpha0")
+    a, b = check_value(a, _LENGTH, "a"), check_value(b, _LENGTH, "b")
+    layout = check_value(layout, _LAYOUT, "layout")
     left = np.array([_miura_vertex(i, 1, alpha0, layout) for i in range(1, N + 2)])
     bottom = np.array([_miura_vertex(1, j, alpha0, layout) for j in range(2, M + 2)])
     l_ab, l_ac = (a, b) if layout == "zigzag_j" else (b, a)
@@ -264,10 +264,10 @@ def perturb_angles(bd: BoundaryData, amplitude: float = 0.05 * np.pi,
     [0, 2^63 - 1] nor a numpy Generator.
     """
     check_boundary(bd)
-    amplitude = check_argument(amplitude, Key("number", low=0.0, hint="(an angle, radians)"),
+    amplitude = check_value(amplitude, Key("number", low=0.0, hint="(an angle, radians)"),
                                "amplitude")
     if seed is not None and not isinstance(seed, np.random.Generator):
-        seed = check_argument(seed, _SEED, "seed")
+        seed = check_value(seed, _SEED, "seed")
     rng = np.random.default_rng(seed)
     left = bd.left.copy()
     bottom = bd.bottom.copy()

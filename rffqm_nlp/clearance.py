@@ -29,11 +29,11 @@ import casadi as ca
 import numpy as np
 
 from . import memory
-from .backend import check_argument, describe_argument, finite_array
+from .backend import finite_array
 from .boundary import check_size
 from .collisions import near_pairs
 from .errors import InputError
-from .files import Key
+from .files import Key, check_value, describe_value
 from .numpy_model import fold
 from .pattern import Pattern, check_fold_angle, check_pattern
 from .transcription import NLP
@@ -73,7 +73,7 @@ def closest(pattern: Pattern, omega: float, clearance: float) -> tuple[np.ndarra
     arguments of other kinds (``omega`` one number in [-pi, pi], ``clearance`` >= 0)."""
     check_pattern(pattern, "pattern")
     omega = check_fold_angle(omega)
-    clearance = check_argument(clearance, _CLEARANCE, "clearance")
+    clearance = check_value(clearance, _CLEARANCE, "clearance")
     pairs, dist = near_pairs(pattern, fold(pattern, omega), clearance * (1 + MARGIN))
     order = np.argsort(dist, kind="stable")
     order = order[dist[order] < clearance * (1 + MARGIN)][:ROUND_PAIRS]
@@ -92,10 +92,10 @@ def constrain(nlp: NLP, pattern: Pattern, omega: float, pairs: np.ndarray,
     two distinct panels each; :class:`InputError` for arguments of other kinds."""
     if not isinstance(nlp, NLP):
         raise InputError(f"nlp must be the design's NLP (rffqm_nlp.transcription.NLP), got "
-                         f"{describe_argument(nlp)}")
+                         f"{describe_value(nlp)}")
     check_pattern(pattern, "pattern")
     omega = check_fold_angle(omega)
-    clearance = check_argument(clearance, _CLEARANCE, "clearance")
+    clearance = check_value(clearance, _CLEARANCE, "clearance")
     P = pattern.N * pattern.M
     pairs = finite_array(pairs, "pairs", shape=(None, 2), allowed=f"an (n, 2) array of panel "
                          f"indices in [0, {P})")

@@ -90,9 +90,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .backend import check_argument, describe_argument, finite_array, finite_result
+from .backend import finite_array, finite_result
 from .errors import InputError
-from .files import Key
+from .files import Key, check_value, describe_value
 from .numpy_model import fold
 from .pattern import Pattern, check_fold_angle, check_pattern
 
@@ -179,9 +179,9 @@ def collisions(pattern: Pattern, omega_max: float, *, clearance: float = 0.0,
     """
     check_pattern(pattern, "pattern")
     w_max = check_fold_angle(omega_max, "omega_max")
-    clearance = check_argument(clearance, Key("number", low=0, hint="(a distance)"),
+    clearance = check_value(clearance, Key("number", low=0, hint="(a distance)"),
                                "clearance")
-    tol = check_argument(tol, Key("number", low=0, low_open=True, hint="(a step in omega)"),
+    tol = check_value(tol, Key("number", low=0, low_open=True, hint="(a step in omega)"),
                          "tol")
     geo = _Geometry(pattern)
     flat = _flat_overlaps(geo)
@@ -432,7 +432,7 @@ def panel_distance(geo: _Geometry, S: np.ndarray, s: np.ndarray, p: np.ndarray,
         geo = _Geometry(geo)
     if not isinstance(geo, _Geometry):
         raise InputError(f"geo must be the crease pattern (rffqm_nlp.Pattern) of the "
-                         f"states, got {describe_argument(geo)}")
+                         f"states, got {describe_value(geo)}")
     V, P = (geo.N + 1) * (geo.M + 1), geo.N * geo.M
     S = finite_array(S, "S", shape=(None, V, 3), allowed=f"states (K, {V}, 3) of finite "
                      "numbers")
@@ -485,7 +485,7 @@ def _triangles(A: Any, B: Any, scale: Any) -> tuple[np.ndarray, np.ndarray, floa
                      "numbers")
     B = finite_array(B, "B", shape=(len(A), 3, 3), allowed=f"triangles ({len(A)}, 3, 3) of "
                      "finite numbers, as many as A")
-    scale = check_argument(scale, Key("number", low=0.0, low_open=True, hint="(a length)"),
+    scale = check_value(scale, Key("number", low=0.0, low_open=True, hint="(a length)"),
                            "scale")
     return A, B, scale
 
@@ -986,7 +986,7 @@ def near_pairs(pattern: Pattern, Y: np.ndarray, reach: float) -> tuple[np.ndarra
     :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds or shapes."""
     check_pattern(pattern, "pattern")
     Y = finite_array(Y, "Y", shape=(pattern.N + 1, pattern.M + 1, 3))
-    reach = check_argument(reach, Key("number", low=0.0, hint="(a distance)"), "reach")
+    reach = check_value(reach, Key("number", low=0.0, hint="(a distance)"), "reach")
     geo = _Geometry(pattern)
     S = Y.reshape(1, -1, 3)
     pq = _near_pairs(geo, geo.centres(S)[0], float(reach))

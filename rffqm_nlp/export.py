@@ -23,7 +23,7 @@ from .files import atomic_path
 from .foldfile import (CREATOR, FLOAT32_MAX, FLOAT64_MAX, check_coordinates, finite_pattern,
                        edge_assignments, edges_vertices, faces_vertices, write_fold)
 from .marching import fold
-from .pattern import Pattern, check_omega
+from .pattern import Pattern, check_fold_angle
 
 if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
     import trimesh
@@ -157,7 +157,7 @@ def folded_mesh(pat: Pattern, omega: float) -> trimesh.Trimesh:
     coordinates that are not finite."""
     import trimesh
 
-    om = float(check_omega(omega))
+    om = check_fold_angle(omega)
     Y = check_coordinates(fold(finite_pattern(pat), om),
                           f"the folded coordinates at omega {om:g}")
     return trimesh.Trimesh(vertices=Y.reshape(-1, 3), faces=triangles(pat.N, pat.M),

@@ -528,14 +528,20 @@ def describe_value(value: Any) -> str:
     if isinstance(value, (bool, np.bool_)):
         return f"{'true' if value else 'false'} (a boolean)"
     if isinstance(value, (int, np.integer)):
-        digits = len(str(abs(int(value))))
-        return f"the whole number {int(value)}" if digits <= 15 else \
-            f"a whole number of {digits} digits"
+        value = int(value)
+        if abs(value) < 10**15:
+            return f"the whole number {value}"
+        if abs(value).bit_length() < 14000:          # str() refuses over 4300 digits
+            return f"a whole number of {len(str(abs(value)))} digits"
+        digits = int(abs(value).bit_length() * math.log10(2)) + 1
+        return f"a whole number of about {digits} digits"
     if isinstance(value, (float, np.floating)):
         return f"the number {float(value):g}"
     if isinstance(value, str):
         return (f"the string {value!r}" if _SAFE_NAME.fullmatch(value)
                 else f"a string of {len(value)} characters")
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        return describe_value(value.item())
     if isinstance(value, (list, tuple, np.ndarray)):
         return f"a list of {_items(len(value))}"
     if isinstance(value, Mapping):
@@ -608,8 +614,12 @@ def check_value(value: Any, key: Key, name: str, error: type[InputError] = Input
             return check_value(value, key, name)
         except InputError as exc:
             raise error(str(exc)) from None
+    if not isinstance(key, Key):
+        raise InputError(f"key must be a rffqm_nlp.files.Key, got {describe_value(key)}")
     if value is None and key.optional:
         return None
+    if isinstance(value, np.ndarray) and value.ndim == 0:      # an API caller's NumPy scalar
+        value = value.item()
     checked = _CHECKS[key.kind](value, key, name)
     if checked is _REFUSED:
         hint = ""

@@ -22,7 +22,7 @@ from . import __version__
 from .errors import InputError
 from .files import describe_value, jsonable, read_json, write_json
 from .marching import fold, fold_angles
-from .pattern import Pattern, check_omega, motion_omegas
+from .pattern import Pattern, check_fold_angle, check_omega, motion_omegas
 from .results import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
 
 CREATOR = "rffqm-nlp"
@@ -109,7 +109,7 @@ def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
     At omega = 0 every crease is flat; the signs at omega = pi/2 (the same on the whole
     positive branch, tan(gamma/2) = k tan(omega/2)) are used instead.
     """
-    om = float(check_omega(omega))
+    om = check_fold_angle(omega)
     gamma = edge_fold_angles(pat, om if om != 0.0 else np.pi / 2)
     kinds = np.where(gamma > 0, "V", "M")
     kinds[_boundary_mask(pat.N, pat.M)] = "B"
@@ -141,7 +141,7 @@ def fold_dict(pat: Pattern, omega: float, frames: int | np.ndarray | None = None
     if not isinstance(pat, Pattern):
         raise InputError(f"fold_dict expects a Pattern, got {type(pat).__name__}")
     finite_pattern(pat)
-    om = float(check_omega(omega))
+    om = check_fold_angle(omega)
     d: dict[str, Any] = {
         "file_spec": 1.2,
         "file_creator": CREATOR,

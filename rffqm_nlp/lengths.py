@@ -46,10 +46,10 @@ import numpy as np
 from scipy.optimize import linprog
 
 from . import memory
-from .backend import check_argument, finite_array
+from .backend import finite_array
 from .boundary import BoundaryData, check_boundary, check_size
 from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
-from .files import Key
+from .files import Key, check_value
 from .ipopt_options import NO_OPTION_FILE
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
@@ -141,7 +141,7 @@ def memory_estimate(N: int, M: int, program: str) -> float:
     """Bytes that a side-length ``program`` ("lp": HiGHS' LPs, "nlp": IPOPT's "uniform"
     NLP) needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
     N, M = check_size(N, M)
-    program = check_argument(program, _PROGRAM, "program")
+    program = check_value(program, _PROGRAM, "program")
     return memory.BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
 
 
@@ -150,8 +150,8 @@ def check_memory(bd: BoundaryData, program: str, name: str) -> None:
     hold with ``program`` (:func:`memory_estimate`): one :class:`InputError` line naming
     the function ``name``."""
     check_boundary(bd)
-    program = check_argument(program, _PROGRAM, "program")
-    name = check_argument(name, Key("string"), "name")
+    program = check_value(program, _PROGRAM, "program")
+    name = check_value(name, Key("string"), "name")
     memory.refuse_beyond(memory_estimate(bd.N, bd.M, program),
                          f"{name} on {bd.N} x {bd.M} panels",
                          "choose fewer panels or keep the given side lengths")
@@ -171,9 +171,9 @@ def side_length_lp(bd: BoundaryData, eps: float = 1e-2,
     None nor a finite number in the admissible range).
     """
     check_boundary(bd)
-    eps = check_argument(eps, Key("number", low=0.0, low_open=True, hint="(a length)"), "eps")
+    eps = check_value(eps, Key("number", low=0.0, low_open=True, hint="(a length)"), "eps")
     if delta is not None:
-        delta = check_argument(delta, Key("number", low=0.0, low_open=True,
+        delta = check_value(delta, Key("number", low=0.0, low_open=True,
                                           hint="(a length, or None)"), "delta")
     check_memory(bd, "lp", "side_length_lp")
     A = length_maps(bd).interior
@@ -237,12 +237,12 @@ def side_length_nlp(bd: BoundaryData, objective: str = "max_min",
     (:func:`check_memory`).
     """
     check_boundary(bd)
-    objective = check_argument(objective, Key("choice", choices=OBJECTIVES), "objective")
-    min_length = check_argument(DEFAULT_MIN_LENGTH if min_length is None else min_length,
+    objective = check_value(objective, Key("choice", choices=OBJECTIVES), "objective")
+    min_length = check_value(DEFAULT_MIN_LENGTH if min_length is None else min_length,
                                 _MIN_LENGTH, "min_length")
-    tol = check_argument(tol, Key("number", low=0, low_open=True), "tol")
-    max_iter = check_argument(max_iter, Key("whole", low=1, high=2**31 - 1), "max_iter")
-    verbose = check_argument(verbose, Key("bool"), "verbose")
+    tol = check_value(tol, Key("number", low=0, low_open=True), "tol")
+    max_iter = check_value(max_iter, Key("whole", low=1, high=2**31 - 1), "max_iter")
+    verbose = check_value(verbose, Key("bool"), "verbose")
     check_memory(bd, "lp" if objective == "max_min" else "nlp", "side_length_nlp")
     A = length_maps(bd).all_sides
     mean_row = A.mean(axis=0)

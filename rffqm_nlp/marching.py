@@ -19,11 +19,10 @@ import casadi as ca
 import numpy as np
 
 from . import vertex as vx
-from .backend import (Scalar, check_argument, describe_argument, finite_array, finite_result,
-                      is_casadi)
+from .backend import Scalar, finite_array, finite_result, is_casadi
 from .boundary import BoundaryData, check_boundary, check_size
 from .errors import InputError, MarchingError
-from .files import Key
+from .files import Key, check_value, describe_value
 from .pattern import (Pattern, check_fold_angle, check_fold_memory, check_folded,
                       check_march_memory, check_omega, check_pattern)
 
@@ -166,7 +165,7 @@ def _quaternion(q: Any, name: str, what: str) -> list:
         return [q[i] for i in range(4)]
     if isinstance(q, (str, bytes)) or not isinstance(q, (tuple, list)) or len(q) != 4:
         raise InputError(f"{what}: {name} must be a quaternion, a sequence of 4 components "
-                         f"(w, x, y, z), got {describe_argument(q)}")
+                         f"(w, x, y, z), got {describe_value(q)}")
     return list(q)
 
 
@@ -608,11 +607,11 @@ class Evaluation:
 
     def __init__(self, f: ca.Function, args: list):
         if not isinstance(f, ca.Function):
-            raise InputError(f"f must be a CasADi Function, got {describe_argument(f)}")
+            raise InputError(f"f must be a CasADi Function, got {describe_value(f)}")
         if isinstance(args, (str, bytes)) or not isinstance(args, (list, tuple)) \
                 or len(args) != f.n_in():
             raise InputError(f"args must be a list of {f.n_in()} arrays (one per input of "
-                             f"{f.name()}), got {describe_argument(args)}")
+                             f"{f.name()}), got {describe_value(args)}")
         self._f = f
         self._start([self._input(k, a) for k, a in enumerate(args)])
 
@@ -660,7 +659,7 @@ class Evaluation:
     def set(self, k: int, value) -> None:
         """Overwrite input ``k`` in place (same size)."""
         if not (type(k) is int and 0 <= k < len(self._args)):
-            k = check_argument(k, Key("whole", low=0, high=len(self._args) - 1), "k")
+            k = check_value(k, Key("whole", low=0, high=len(self._args) - 1), "k")
         self._args[k][:] = self._input(k, value)
 
     def run(self) -> list[np.ndarray]:

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 
 from . import memory
-from .backend import check_argument, describe_argument, finite_array, finite_result
+from .backend import finite_array, finite_result
 from .boundary import BoundaryData
 from .errors import InputError
-from .files import Key
+from .files import Key, check_value, describe_value
 
 #: Most states of a folding motion (:func:`check_frames`).
 MAX_FRAMES = 100_000
@@ -34,7 +34,7 @@ _COUNT = Key("whole", low=0, high=2**63)
 
 def check_march_memory(N: int, M: int) -> None:
     """Refuse (:class:`InputError`) a march of N x M panels that this machine cannot hold."""
-    N, M = check_argument(N, _COUNT, "N"), check_argument(M, _COUNT, "M")
+    N, M = check_value(N, _COUNT, "N"), check_value(M, _COUNT, "M")
     need = MARCH_BYTES_PER_PANEL * float(N) * M
     if need > MEMORY_CHECK_FROM:
         memory.refuse_beyond(need, f"a march of {N} x {M} panels", "choose fewer panels")
@@ -43,8 +43,8 @@ def check_march_memory(N: int, M: int) -> None:
 def check_fold_memory(N: int, M: int, states: int) -> None:
     """Refuse (:class:`InputError`) ``states`` folded states of N x M panels that this
     machine cannot hold."""
-    N, M = check_argument(N, _COUNT, "N"), check_argument(M, _COUNT, "M")
-    states = check_argument(states, _COUNT, "states")
+    N, M = check_value(N, _COUNT, "N"), check_value(M, _COUNT, "M")
+    states = check_value(states, _COUNT, "states")
     need = FOLD_BYTES_PER_STATE * float(states) * (N + 1) * (M + 1)
     if need > MEMORY_CHECK_FROM:
         memory.refuse_beyond(need, f"{states} folded states of {N} x {M} panels",
@@ -99,8 +99,8 @@ def check_frames(frames: int, minimum: int = 1, name: str = "frames") -> int:
     """``frames``, a number of states of a folding motion, checked to be a whole number (not
     a bool) in [``minimum``, :data:`MAX_FRAMES`]; ``name`` is the argument or option named
     in the error. Raises :class:`InputError` (one line) otherwise."""
-    minimum = check_argument(minimum, Key("whole", low=0, high=MAX_FRAMES), "minimum")
-    return check_argument(frames, Key("whole", low=minimum, high=MAX_FRAMES), name)
+    minimum = check_value(minimum, Key("whole", low=0, high=MAX_FRAMES), "minimum")
+    return check_value(frames, Key("whole", low=minimum, high=MAX_FRAMES), name)
 
 
 def check_pattern(pat: Any, name: str = "pattern") -> "Pattern":
@@ -110,7 +110,7 @@ def check_pattern(pat: Any, name: str = "pattern") -> "Pattern":
         hint = (" (march it first: rffqm_nlp.march(bd))" if isinstance(pat, BoundaryData)
                 else "")
         raise InputError(f"{name} must be a crease pattern (rffqm_nlp.Pattern){hint}, got "
-                         f"{describe_argument(pat)}")
+                         f"{describe_value(pat)}")
     return pat
 
 
@@ -220,7 +220,7 @@ class Pattern:
         """Inverse of :meth:`to_dict`."""
         if not isinstance(d, Mapping):
             raise InputError(f"a pattern must be a table of {', '.join(_FIELDS)}, got "
-                             f"{describe_argument(d)}")
+                             f"{describe_value(d)}")
         for k in _FIELDS:
             if k not in d:
                 raise InputError(f"the pattern is missing the field {k!r}")

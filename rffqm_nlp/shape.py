@@ -26,10 +26,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import directed_hausdorff
 
-from .backend import (check_argument, describe_argument, finite_array, finite_result, is_casadi,
-                      math_for)
+from .backend import finite_array, finite_result, is_casadi, math_for
 from .errors import InputError
-from .files import Key
+from .files import Key, check_value, describe_value
 from .surfaces import Surface, check_surface, point_set_diameter
 
 Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
@@ -54,7 +53,7 @@ def _split(P: Lattice) -> tuple[list, bool]:
                              f"shape, got shapes {[tuple(c.shape) for c in comps]}")
         return comps, False
     raise InputError("a lattice must be an (n, m, 3) array or a sequence of three (n, m) "
-                     f"matrices (x, y, z), got {describe_argument(P)}")
+                     f"matrices (x, y, z), got {describe_value(P)}")
 
 
 def _join(comps: Sequence[Any], stacked: bool) -> Any:
@@ -107,8 +106,8 @@ def fundamental_forms(P: Lattice, hu: float = 1.0, hv: float = 1.0) -> Forms:
     a term that sees them, such as the design's position term (docs/paper.md s.8).
     """
     comps, _ = _split(P)
-    hu = check_argument(hu, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hu")
-    hv = check_argument(hv, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hv")
+    hu = check_value(hu, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hu")
+    hv = check_value(hv, Key("number", low=0.0, low_open=True, hint="(a spacing)"), "hv")
     n, m = comps[0].shape
     if n < 3 or m < 3:
         raise InputError(f"fundamental_forms needs a lattice of at least 3 x 3 points, got "
@@ -167,7 +166,7 @@ def kabsch(P: Any, Q: Any, reflection: bool = False) -> tuple[np.ndarray, np.nda
     (p, _), (q, _) = _points(P, "P"), _points(Q, "Q")
     if p.shape != q.shape:
         raise InputError(f"kabsch needs corresponding points, got {len(p)} and {len(q)}")
-    reflection = check_argument(reflection, Key("bool"), "reflection")
+    reflection = check_value(reflection, Key("bool"), "reflection")
     pc, qc = p.mean(axis=0), q.mean(axis=0)
     with np.errstate(all="ignore"):
         H = (p - pc).T @ (q - qc)

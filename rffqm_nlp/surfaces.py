@@ -23,6 +23,7 @@ with :class:`Mesh` (module ``rffqm_nlp.meshes``).
 
 from __future__ import annotations
 
+import os
 import hashlib
 import importlib
 import importlib.util
@@ -43,9 +44,9 @@ from scipy.optimize import brentq
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from . import backend, memory
-from .backend import check_argument, describe_argument, finite_array, finite_result
+from .backend import finite_array, finite_result
 from .errors import InputError, SurfaceError, one_line
-from .files import Key, check_table, shown_name
+from .files import Key, check_table, check_value, describe_value, named_path, shown_name
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
@@ -73,9 +74,9 @@ _BYTES_PER_ENTRY, _MEMORY_CHECK_FROM = 32.0, 1e8
 def refuse_points(count: float, rows: int, what: str) -> None:
     """Refuse (:class:`InputError`) an evaluation of ``rows`` numbers at each of ``count``
     points (``what``) that this machine cannot hold."""
-    count = check_argument(count, Key("number", low=0.0), "count")
-    rows = check_argument(rows, Key("whole", low=0, high=2**31), "rows")
-    what = check_argument(what, Key("string"), "what")
+    count = check_value(count, Key("number", low=0.0), "count")
+    rows = check_value(rows, Key("whole", low=0, high=2**31), "rows")
+    what = check_value(what, Key("string"), "what")
     need = _BYTES_PER_ENTRY * count * rows
     if need > _MEMORY_CHECK_FROM:
         memory.refuse_beyond(need, what, "use fewer points")
@@ -87,7 +88,7 @@ def check_surface(surface: Any, name: str = "target") -> "Surface":
     naming ``name`` and what it got."""
     if not isinstance(surface, Surface):
         raise SurfaceError(f"{name} must be a surface (rffqm_nlp.surfaces.get(name), "
-                           f"surfaces.Custom or surfaces.Mesh), got {describe_argument(surface)}")
+                           f"surfaces.Custom or surfaces.Mesh), got {describe_value(surface)}")
     return surface
 
 
@@ -452,7 +453,7 @@ class Custom(Surface):
                  reference: str | None = None):
         if not callable(fn):
             raise SurfaceError(f"Custom needs a callable fn(u, v) -> (x, y, z), got "
-                               f"{describe_argument(fn)}")
+                               f"{describe_value(fn)}")
         name = _checked_value(name, Key("string"), "name")
         self._fn = fn
         self.reference = (None if reference is None else
@@ -495,7 +496,7 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
     if parts is None or len(parts) != 3 or any(p.shape != (1, 1) for p in parts):
         raise SurfaceError(
             f"the surface callable must return three scalars (x, y, z) when called with "
-            f"{what}, got {describe_argument(out)}")
+            f"{what}, got {describe_value(out)}")
     if kind is ca.DM and not all(np.isfinite(float(p)) for p in parts):
         raise SurfaceError(f"the surface callable returned non-finite values (NaN or "
                            f"infinity) at {what}")
@@ -533,7 +534,7 @@ def parse_reference(ref: Any) -> tuple[str, str, str]:
         if _DOTTED.fullmatch(where):
             return "module", where, qualname
     raise SurfaceError(f"[target] python must have the form {_REFERENCE_FORMS}, got "
-                       f"{describe_argument(ref)}")
+                       f"{describe_value(ref)}")
 
 
 def resolve_reference(ref: Any, root: str | Path | None = None) -> str:
@@ -813,7 +814,7 @@ def _check_root(root: Any) -> Path | None:
     """A folder argument: None, a string or a path."""
     if root is not None and not isinstance(root, (str, Path)):
         raise SurfaceError(f"root must be a folder (a string or a path) or None, got "
-                           f"{describe_argument(root)}")
+                           f"{describe_value(root)}")
     return None if root is None else Path(root)
 
 
@@ -847,7 +848,7 @@ def get(name: str, domain: Any = None, **params: float) -> Surface:
 def _spec(name: str) -> _Spec:
     if not isinstance(name, str):
         raise SurfaceError(f"name must be the name of a built-in surface (one of "
-                           f"{', '.join(_BUILTINS)}), got {describe_argument(name)}")
+                           f"{', '.join(_BUILTINS)}), got {describe_value(name)}")
     if name not in _BUILTINS:
         shown = repr(name) if shown_name(name) == name else shown_name(name)
         raise SurfaceError(f"unknown surface {shown}; built-in surfaces: {', '.join(_BUILTINS)}"
@@ -883,14 +884,16 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
     ``domain = [[u0, u1], [v0, v1]]``, or ``python = "file.py:function"`` (a file relative to
     ``root``, default the current folder) or ``python = "package.module:function"``, plus a
     required ``domain``, or ``mesh = "part.stl"`` (a mesh or point cloud file relative to
-    ``root``: its :class:`Mesh`, by its resolved absolute path).
+    ``root``: its :class:`Mesh`, by its absolute path).
 
     Code named by ``python`` runs only with ``trust=True`` (a target file from someone else
     must not run code unless asked to); without it :class:`SurfaceError` names the code.
+    Without it too, a ``mesh`` must lie in ``root`` or below
+    (:func:`rffqm_nlp.files.named_path`).
     Every key is checked (:func:`rffqm_nlp.files.check_table`).
     """
     if not isinstance(table, Mapping):
-        raise SurfaceError(f"[target] must be a table, got {describe_argument(table)}")
+        raise SurfaceError(f"[target] must be a table, got {describe_value(table)}")
     root = _check_root(root)
     trust = _checked_value(trust, Key("bool"), "trust")
     if not rebuildable(table):
@@ -900,7 +903,12 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
             "DesignProblem(target=<your surface>, **result.problem['design']), or in a file "
             "name a function with python = \"file.py:function\" and domain")
     if "mesh" in table:
-        return Mesh((Path(root or ".") / _checked(table, MESH_KEYS)["mesh"]).resolve())
+        mesh = _checked(table, MESH_KEYS)["mesh"]
+        try:
+            path = named_path(root or ".", mesh, "[target] mesh", trust)
+        except InputError as exc:
+            raise SurfaceError(str(exc)) from None
+        return Mesh(Path(os.path.abspath(path)))
     if "python" in table and "name" in table:
         raise SurfaceError("[target] takes name (a built-in surface) or python (your own "
                            "function), not both")
@@ -944,7 +952,7 @@ def config_of(surface: Surface) -> dict:
 def rebuildable(table: Mapping[str, Any]) -> bool:
     """Whether a ``[target]`` table names its surface (not a record of :func:`config_of`)."""
     if not isinstance(table, Mapping):
-        raise SurfaceError(f"[target] must be a table, got {describe_argument(table)}")
+        raise SurfaceError(f"[target] must be a table, got {describe_value(table)}")
     return "rebuildable" not in table
 
 
@@ -957,7 +965,7 @@ def _checked(table: Mapping[str, Any], spec: dict[str, Key]) -> dict[str, Any]:
 
 
 def _checked_value(value: Any, key: Key, name: str) -> Any:
-    return check_argument(value, key, name, SurfaceError)
+    return check_value(value, key, name, SurfaceError)
 
 
 # -- validation helpers -------------------------------------------------------------------

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from rffqm_nlp import shape, surfaces, vertex
-from rffqm_nlp.backend import (CASADI, NUMPY, check_argument, check_formula_args,
-                               describe_argument, finite_array, finite_result, is_casadi,
-                               math_for)
+from rffqm_nlp.backend import (CASADI, NUMPY, check_formula_args, finite_array, finite_result,
+                               is_casadi, math_for)
 from rffqm_nlp.errors import InputError, SurfaceError
 from rffqm_nlp.files import Key
 
@@ -118,15 +117,3 @@ def test_formula_arguments_and_results():
         finite_result("text", "x")
 
 
-def test_check_argument_takes_numpy_scalars_and_refuses_unprintable_integers():
-    """The API's wrapper of files.check_value: a 0-d array is its number; a whole number
-    too long for Python to print is refused by its size instead of raising ValueError."""
-    assert check_argument(np.array(3), Key("whole", low=1), "n") == 3
-    assert check_argument(np.float64(0.5), Key("number"), "x") == 0.5
-    with pytest.raises(InputError, match=r"^n must be a whole number >= 1, got a whole number "
-                                         r"of more than 4300 digits"):
-        check_argument(-10**5000, Key("whole", low=1), "n")
-    with pytest.raises(InputError, match="key must be a rffqm_nlp.files.Key"):
-        check_argument(1, None, "n")
-    assert describe_argument(np.array(2.5)) == "the number 2.5"
-    assert describe_argument(10**5000) == "a whole number of more than 4300 digits"

@@ -225,3 +225,17 @@ def test_json_numbers_at_the_edges_are_read(tmp_path):
                     + "9" * files.MAX_JSON_DIGITS + "}")
     assert files.read_json(path) == {"big": 1e308, "small": -5e-324,
                                      "whole": int("9" * files.MAX_JSON_DIGITS)}
+
+
+def test_check_value_takes_numpy_scalars_and_refuses_unprintable_integers():
+    """An API caller's 0-d array is its number; a whole number too long for Python to print
+    is described by its size (str() would raise)."""
+    assert files.check_value(np.array(3), files.Key("whole", low=1), "n") == 3
+    assert files.check_value(np.float64(0.5), files.Key("number"), "x") == 0.5
+    with pytest.raises(InputError, match=r"^n must be a whole number >= 1, got a whole number "
+                                         r"of about 5001 digits$"):
+        files.check_value(-10**5000, files.Key("whole", low=1), "n")
+    with pytest.raises(InputError, match="key must be a rffqm_nlp.files.Key"):
+        files.check_value(1, None, "n")
+    assert files.describe_value(np.array(2.5)) == "the number 2.5"
+    assert files.describe_value(10**15 - 1) == "the whole number 999999999999999"

@@ -259,9 +259,10 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "backend.finite_array": (backend.finite_array, dict(value=[1.0, 2.0], name="x")),
     "backend.check_formula_args": (backend.check_formula_args, dict(alpha=1.0, sigma=1.0)),
     "backend.finite_result": (backend.finite_result, dict(value=np.ones(3), what="x")),
-    "backend.check_argument": (backend.check_argument, dict(
+    # the one validator of numbers, which the modules above call
+    "files.check_value": (rq.files.check_value, dict(
         value=2, key=rq.files.Key("whole", low=1), name="n")),
-    "backend.describe_argument": (backend.describe_argument, dict(value=np.array(2.5))),
+    "files.describe_value": (rq.files.describe_value, dict(value=np.array(2.5))),
 }
 #: Calls that take no arguments: called once each, their results checked.
 NO_ARGUMENTS = {"surfaces.names": surfaces.names, "marching.panel_cell": marching.panel_cell}

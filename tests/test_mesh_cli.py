@@ -149,8 +149,12 @@ def test_design_from_a_mesh_file(tmp_path, monkeypatch):
     assert isinstance(target, trimesh.Trimesh) and len(target.vertices) == 41 * 41
     moved = target.vertices @ result.rotation.T + result.translation
     assert trimesh.proximity.closest_point(trimesh.load(path), moved)[1].max() < 1e-9
-    # the saved result rebuilds its target from the path
-    assert isinstance(rq.surfaces.from_config(data["problem"]["target"]), rq.surfaces.Mesh)
+    # the saved result rebuilds its target from the path: an absolute path, which a file
+    # from others may name only with trust
+    with pytest.raises(rq.SurfaceError, match="outside the folder"):
+        rq.surfaces.from_config(data["problem"]["target"])
+    assert isinstance(rq.surfaces.from_config(data["problem"]["target"], trust=True),
+                      rq.surfaces.Mesh)
 
 
 def test_a_design_file_names_a_mesh_relative_to_itself(tmp_path, monkeypatch):
@@ -185,3 +189,19 @@ def test_bad_mesh_keys_are_refused_in_one_line(tmp_path, table, fragments):
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
     assert not out.exists()
+
+
+@pytest.mark.parametrize("how", ["absolute", "dots"])
+def test_a_design_file_opens_no_mesh_outside_its_folder(tmp_path, how):
+    """A file from others names meshes only in its own folder unless the caller trusts it."""
+    (tmp_path / "private").mkdir()
+    (tmp_path / "downloads").mkdir()
+    path = cap_mesh(tmp_path / "private")
+    name = str(path) if how == "absolute" else "../private/cap.stl"
+    toml = tmp_path / "downloads" / "part.toml"
+    toml.write_text(f'[target]\nmesh = "{name}"\n[design]\npanels = [8, 8]\n')
+    result = runner.invoke(app, ["design", str(toml), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "[target] mesh names a file outside" in result.stderr
+    assert "private" not in result.stderr and not (tmp_path / "out").exists()
+    problem, _ = rq.load_design(toml, trust=True)
+    assert isinstance(problem.target, rq.surfaces.Mesh)
