@@ -29,6 +29,7 @@ from . import numpy_model, shape, stencils
 from . import vertex as vx
 from .backend import Scalar
 from .boundary import BoundaryData
+from .errors import InputError
 from .marching import (Evaluation, boundary_inputs, crease_quaternion, evaluate,
                        folded_function, locate_failure, marched_function, panel_cell,
                        pattern_function, qmul, rotate_planar, rotated_edges)
@@ -1300,8 +1301,11 @@ class _Projection:
                 or not np.array_equal(sigma, self._sigma)):
             return None
         N, M = mu.shape
-        phi = np.arctan((-self._kh0 / vx.mu2(alpha, beta, self._sigma)[0, :]
-                         * self._sp)[1:N, :M])
+        try:
+            mu2 = vx.mu2(alpha, beta, self._sigma)[0, :]
+        except InputError:          # a vertex at the pole of its fold multiplier
+            return None
+        phi = np.arctan((-self._kh0 / mu2 * self._sp)[1:N, :M])
         signs = _crease_quaternion_signs(alpha, beta, self._sigma, phi)
         out = self._lay.pack({"A": alpha, "B": beta, "LH": lh, "LV": lv, "TH": theta,
                               "Qw": qw * signs, "Qx": qx * signs, "Qy": qy * signs,
