@@ -8,11 +8,20 @@ file, exit 1 when not free), ``targets`` (the built-in surfaces) and ``march`` (
 marching of a perturbed Miura-ori).
 
 Every user error (missing or bad file, unknown target, a failed marching check, an
-infeasible design, a solver failure) ends with a one-line red reason and exit status 2,
-never a traceback. Files are written atomically; ``design`` and ``march`` write their
-folder into a staging folder next to it and replace the output folder whole only when every
-file succeeded (:func:`rffqm_nlp.files.replace_folder`), so a failure or a kill leaves the
-complete old folder or the complete new one.
+infeasible design, a solver failure, an option out of its range, a path no file can have)
+ends with a one-line red reason and exit status 2, never a traceback; every message and
+every path or name the commands print goes through :func:`rffqm_nlp.errors.safe_text` (one
+line, control characters escaped). Options that are not of their type at all (``--frames
+abc``, a path with a NUL character) are refused by typer itself, with its message on one
+line and exit status 2. Numeric options are checked by :func:`rffqm_nlp.files.check_value`
+against the ranges their help says, and sizes before any work: at most :data:`MAX_FRAMES`
+states for any ``--frames``, the memory estimates of ``march``, ``fold`` and ``render``
+(:mod:`rffqm_nlp.memory`), and the page size of ``view`` (:func:`rffqm_nlp.view.check_size`).
+
+Files are written atomically; ``design`` and ``march`` write their folder into a staging
+folder next to it and replace the output folder whole only when every file succeeded
+(:func:`rffqm_nlp.files.replace_folder`), so a failure or a kill leaves the complete old
+folder or the complete new one.
 """
 
 from __future__ import annotations
@@ -20,7 +29,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import re
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Optional
@@ -30,20 +41,47 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
-from typer.core import TyperCommand
+from typer.core import TyperCommand, TyperGroup
 
 from . import memory
 from .boundary import LAYOUTS, miura_boundary, perturb_angles
-from .errors import InputError, RffqmError, one_line
+from .errors import InputError, RffqmError, one_line, safe_text
 from .export import EXPORTERS
-from .files import check_out_dir, jsonable, replace_folder, write_json
-from .pattern import check_frames, check_omega, motion_omegas
+from .files import Key, check_out_dir, check_value, jsonable, replace_folder, write_json
+from .pattern import motion_omegas
 from .results import DesignResult
 
 if TYPE_CHECKING:
     from .design import DesignProblem, SolveOptions
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode="markdown",
+
+class _OneLineErrors(TyperGroup):
+    """The command group: typer's own usage errors (an option not of its type, an unknown
+    option or command, a missing argument) in one line too, "error: <typer's message>
+    (<command> --help)", with typer's exit status 2."""
+
+    def main(self, *args, standalone_mode: bool = True, **kwargs):
+        if not standalone_mode:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        try:
+            code = super().main(*args, standalone_mode=False, **kwargs)
+        except typer.TyperException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":    # `rffqm` alone: the help
+                exc.show()
+            else:
+                ctx = getattr(exc, "ctx", None)
+                where = f" ({ctx.command_path} --help)" if ctx is not None else ""
+                console.print(f"[bold red]error:[/] {shown(exc.format_message() + where)}",
+                              highlight=False, soft_wrap=True)
+            sys.exit(getattr(exc, "exit_code", 2))
+        except typer.Abort:
+            console.print("[bold red]aborted[/]", highlight=False)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+app = typer.Typer(cls=_OneLineErrors, add_completion=False, no_args_is_help=True,
+                  rich_markup_mode="markdown",
                   help="Forward and inverse design of rigidly and flat-foldable origami.")
 console = Console(stderr=True)
 
@@ -57,6 +95,23 @@ TRUST_HELP = ("Run the code that the target file names (python = \"file.py:funct
               "\"package.module:function\"); only for files you trust.")
 #: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
 DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
+#: Most states of any --frames (fold, render, view, march).
+MAX_FRAMES = 1000
+#: Most worker processes of ``sweep --scheduler local``.
+MAX_WORKERS = 256
+#: Longest path an argument or option takes, and longest name in it, in bytes (Linux's
+#: PATH_MAX and NAME_MAX); an output's own name leaves :data:`OUT_ROOM` more for the
+#: temporary names written next to it (".<name>.staging-<pid>-<token>").
+MAX_PATH, MAX_NAME, OUT_ROOM = 4096, 255, 40
+#: The numeric options' ranges (their help says them): the fold parameter, march's seed,
+#: perturbation (radians), Miura sides and acute angle, and panels a side.
+OMEGA = Key("number", low=-math.pi, high=math.pi, hint="(radians: [-pi, pi])")
+SEED = Key("whole", low=0, high=2**63 - 1)
+PERTURB = Key("number", low=0.0, high=math.pi / 2, hint="(radians)")
+SIDE = Key("number", low=1e-6, high=1e6, hint="(a length)")
+ACUTE = Key("number", low=0.0, high=math.pi / 2, low_open=True, high_open=True,
+            hint="(radians)")
+PANELS = Key("whole", low=1, high=100_000)
 
 
 def _version(value: bool) -> None:
@@ -76,21 +131,77 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 # --------------------------------------------------------------------------- helpers
 @contextmanager
 def user_errors() -> Iterator[None]:
-    """Turn the package's named errors into a one-line reason and exit status 2."""
+    """Turn the package's named errors, and the errors of a path no file can have (too
+    long, a NUL character, characters the file system cannot encode), into a one-line
+    reason and exit status 2."""
     try:
         yield
     except (RffqmError, OSError) as exc:
-        console.print(f"[bold red]error:[/] {escape(one_line(exc))}", highlight=False,
-                      soft_wrap=True)
-        raise typer.Exit(2) from None
+        _fail(one_line(exc))
+    except ValueError as exc:
+        if not _path_error(exc):
+            raise
+        _fail(f"a path no file can have: {one_line(exc)}")
     except KeyboardInterrupt:
         console.print("[bold red]interrupted[/]", highlight=False)
         raise typer.Exit(130) from None
 
 
+def _fail(reason: str) -> None:
+    console.print(f"[bold red]error:[/] {shown(reason)}", highlight=False, soft_wrap=True)
+    raise typer.Exit(2) from None
+
+
+def _path_error(exc: ValueError) -> bool:
+    """Whether ``exc`` is what the os module raises for a path with a NUL character
+    ("embedded null byte") or one it cannot encode (a lone surrogate)."""
+    return (isinstance(exc, UnicodeEncodeError)
+            or re.search(r"null (byte|character)", str(exc)) is not None)
+
+
+def shown(text: object) -> str:
+    """``text`` (a message, a path, a name from a file) as the commands print it: through
+    :func:`rffqm_nlp.errors.safe_text`, rich markup escaped."""
+    return escape(safe_text(str(text)))
+
+
 def warn(message: str) -> None:
     """A yellow one-line warning on stderr."""
-    console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
+    console.print(f"[yellow]warning:[/] {shown(message)}", highlight=False, soft_wrap=True)
+
+
+def wrote(*paths: Path) -> None:
+    """"wrote <path> and <path>" on stderr."""
+    console.print("wrote " + " and ".join(shown(p) for p in paths), highlight=False,
+                  soft_wrap=True)
+
+
+def check_path(path: Optional[Path], name: str, output: bool = False) -> None:
+    """Refuse, in one line, a path that no file can have: with a NUL character, characters
+    the file system cannot encode, longer than :data:`MAX_PATH` bytes or with a name longer
+    than :data:`MAX_NAME` (an ``output`` path's own name :data:`OUT_ROOM` less). Nothing
+    for None."""
+    if path is None:
+        return
+    text = os.fspath(path)
+    if "\x00" in text:
+        raise InputError(f"{name} {text}: a path cannot hold a NUL character")
+    try:
+        raw = os.fsencode(os.path.abspath(text))
+    except (UnicodeError, ValueError):
+        raise InputError(f"{name} {text}: characters the file system cannot encode") from None
+    names = raw.split(b"/")
+    longest = max(len(part) for part in names)
+    last = MAX_NAME - OUT_ROOM if output else MAX_NAME
+    if len(raw) > MAX_PATH or longest > MAX_NAME or len(names[-1]) > last:
+        raise InputError(f"{name} {text}: too long a path ({len(raw)} bytes, a name of "
+                         f"{max(longest, len(names[-1]))}); paths take at most {MAX_PATH} "
+                         f"bytes, names {MAX_NAME} (an output's {MAX_NAME - OUT_ROOM})")
+
+
+def check_frames(frames: int, minimum: int, name: str = "--frames") -> int:
+    """A --frames option: a whole number from ``minimum`` to :data:`MAX_FRAMES`."""
+    return check_value(frames, Key("whole", low=minimum, high=MAX_FRAMES), name)
 
 
 def _parse_panels(text: str) -> tuple[int, int]:
@@ -181,11 +292,6 @@ def _contacts(result: "DesignResult"):
                                                                           result.omega)
 
 
-def _check_frames(frames: int) -> None:
-    """--frames of render and view: flat and folded flat at least."""
-    check_frames(frames, minimum=2, name="--frames")
-
-
 # --------------------------------------------------------------------------- design
 @app.command(cls=_PanelsCommand)
 def design(
@@ -201,8 +307,9 @@ def design(
     force: bool = typer.Option(False, "--force", help="Replace a non-empty output folder "
                                "(the whole folder: files not written by this run are "
                                "removed)."),
-    max_iter: Optional[int] = typer.Option(None, "--max-iter", min=1, help="Iteration limit "
-                                           "(overrides the file's max_iter)."),
+    max_iter: Optional[int] = typer.Option(None, "--max-iter", help="Iteration limit, a "
+                                           "whole number from 1 to 2^31 - 1 (overrides "
+                                           "the file's max_iter)."),
     panels: Optional[str] = typer.Option(None, "--panels", metavar="2N 2M",
                                          help="Pattern size, two even numbers >= 4: "
                                          "'--panels 20 20' or '--panels 20,20' (overrides "
@@ -226,12 +333,17 @@ def design(
     aligned onto the target.
     """
     from . import viz
-    from .design import check_memory, load_design
+    from .design import SOLVE_KEYS, check_memory, load_design
 
     with user_errors():
+        check_path(target, "TARGET")
+        check_path(out, "--out", output=True)
+        if max_iter is not None:
+            max_iter = check_value(max_iter, SOLVE_KEYS["max_iter"], "--max-iter")
+        size = None if panels is None else _parse_panels(panels)
         problem, options = load_design(target, trust=trust)
-        if panels is not None:
-            problem = dataclasses.replace(problem, panels=_parse_panels(panels))
+        if size is not None:
+            problem = dataclasses.replace(problem, panels=size)
         if max_iter is not None:
             options = dataclasses.replace(options, max_iter=max_iter)
         check_memory(problem, options)     # sizes this machine cannot hold: before any work
@@ -297,7 +409,15 @@ def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem"
     options = _export_options(result)
     for fmt in DESIGN_FORMATS:
         EXPORTERS[fmt].write(folder / EXPORTERS[fmt].filename, pat, omega, **options)
-    view.write_html(result, folder / VIEW_FILE, frames=FRAMES, target=problem.target)
+    frames = min(FRAMES, view.max_frames(pat.N, pat.M))
+    if frames >= 2:
+        if frames < FRAMES:
+            warn(f"view.html has {frames + 1} slider states instead of {FRAMES + 1}: a page "
+                 f"holds at most {view.MAX_POINTS} vertex positions")
+        view.write_html(result, folder / VIEW_FILE, frames=frames, target=problem.target)
+    else:
+        warn(f"view.html skipped: {pat.N} x {pat.M} panels are more than a page holds "
+             f"({view.MAX_POINTS} vertex positions in 3 states)")
     viz.plot_convergence(result.stats.history, folder / "convergence.png")
     if result.curvature is not None:
         viz.plot_curvature(result.curvature, folder / CURVATURE_FILE)
@@ -310,11 +430,11 @@ def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem"
 
 def quantity_table(title: str, rows: list[tuple[str, str]]) -> Table:
     """A two-column rich table of named quantities."""
-    table = Table(title=title)
+    table = Table(title=shown(title))
     table.add_column("quantity")
     table.add_column("value", justify="right")
     for name, value in rows:
-        table.add_row(name, value)
+        table.add_row(shown(name), shown(value))
     return table
 
 
@@ -362,7 +482,8 @@ def check_cmd(
                                   "a FOLD file written by rffqm (.fold).", show_default=False),
     clearance: float = typer.Option(0.0, "--clearance", help="Distance (a sheet thickness, "
                                     "in the pattern's length units) that panels sharing no "
-                                    "vertex must keep; 0: they must not touch."),
+                                    "vertex must keep, from 0 (they must not touch) to "
+                                    "below the pattern's shortest side."),
     omega: Optional[float] = typer.Option(None, "--omega", help="Check the motion from flat "
                                           "to this fold parameter in [-pi, pi] (default: the "
                                           "design's omega)."),
@@ -377,10 +498,14 @@ def check_cmd(
     from .collisions import collisions
 
     with user_errors():
+        check_path(source, "SOURCE")
+        om = None if omega is None else check_value(omega, OMEGA, "--omega")
+        clearance = check_value(clearance, Key("number", low=0.0), "--clearance")
         pattern, designed = _design_to_check(source)
-        om = designed if omega is None else float(check_omega(omega, "--omega"))
-        if not (math.isfinite(clearance) and clearance >= 0):
-            raise InputError(f"--clearance must be a finite distance >= 0, got {clearance:g}")
+        om = designed if om is None else om
+        shortest = float(min(np.min(pattern.lh), np.min(pattern.lv)))
+        check_value(clearance, Key("number", low=0.0, high=shortest, high_open=True,
+                                   hint="(below the pattern's shortest side)"), "--clearance")
         report = collisions(pattern, om, clearance=clearance)
     Console().print(_check_table(report, source))
     raise typer.Exit(0 if report.free else 1)
@@ -428,8 +553,8 @@ def sweep_cmd(
     scheduler: str = typer.Option("local", "--scheduler", help="'local' (a Dask cluster on "
                                   "this machine), 'none' (serially in this process) or the "
                                   "address of a running Dask scheduler (tcp://host:8786)."),
-    workers: int = typer.Option(2, "--workers", min=1, help="Worker processes of the local "
-                                "cluster (one thread each)."),
+    workers: int = typer.Option(2, "--workers", help="Worker processes of the local "
+                                f"cluster (one thread each), 1 to {MAX_WORKERS}."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     trust: bool = typer.Option(False, "--trust", help=TRUST_HELP),
 ) -> None:
@@ -445,6 +570,12 @@ def sweep_cmd(
     from .sweeps import Study, run
 
     with user_errors():
+        check_path(study, "STUDY")
+        check_path(out, "--out", output=True)
+        workers = check_value(workers, Key("whole", low=1, high=MAX_WORKERS), "--workers")
+        if scheduler == "local":
+            memory.refuse_beyond(memory.BASE * (workers + 1), f"a local cluster of {workers} "
+                                 "workers", "choose fewer --workers")
         loaded = Study.load(study, trust=trust)
         check_out_dir(out, force=True)
         frame = run(loaded, out, scheduler=scheduler, workers=workers, progress=not quiet,
@@ -472,7 +603,7 @@ def fold_cmd(
                                       show_default=False),
     omega: Optional[float] = typer.Option(None, help="One fold parameter in [-pi, pi]."),
     frames: Optional[int] = typer.Option(None, help="K states from flat to the designed "
-                                         "omega."),
+                                         f"omega, 1 to {MAX_FRAMES}."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="JSON file to write "
                                        "(default: print to stdout)."),
     aligned: bool = typer.Option(False, "--aligned", help="Move the states rigidly onto the "
@@ -487,13 +618,21 @@ def fold_cmd(
     from . import marching
 
     with user_errors():
+        check_path(result_dir, "RESULT_DIR")
+        check_path(out, "--out", output=True)
         if (omega is None) == (frames is None):
             raise InputError("give exactly one of --omega W or --frames K")
-        result = DesignResult.load(result_dir)
         if frames is not None:
-            om = motion_omegas(result.omega, frames, name="--frames")
+            frames = check_frames(frames, 1)
         else:
-            om = float(check_omega(omega, "--omega"))
+            omega = check_value(omega, OMEGA, "--omega")
+        result = DesignResult.load(result_dir)
+        pat = result.pattern
+        memory.refuse_beyond(memory.states_estimate(pat.N, pat.M, frames or 1),
+                             f"rffqm fold of {pat.N} x {pat.M} panels"
+                             + (f" in {frames} states" if frames else ""),
+                             "choose fewer --frames" if frames else "choose a smaller design")
+        om = motion_omegas(result.omega, frames) if frames is not None else omega
         Y = marching.fold(result.pattern, om)
         if aligned:
             Y = Y @ result.rotation.T + result.translation
@@ -503,7 +642,7 @@ def fold_cmd(
             typer.echo(json.dumps(jsonable(data), allow_nan=False))
         else:
             write_json(out, data)
-            console.print(f"wrote {escape(str(out))}", highlight=False)
+            wrote(out)
 
 
 # --------------------------------------------------------------------------- export
@@ -525,18 +664,21 @@ def export(
     flat to omega.
     """
     with user_errors():
+        check_path(result_dir, "RESULT_DIR")
+        check_path(out, "--out", output=True)
         fmt = format.lower().lstrip(".")
         if fmt not in EXPORTERS:
             raise InputError(f"unknown format {format!r}; choose one of "
                              f"{', '.join(EXPORTERS)}")
         exporter = EXPORTERS[fmt]
+        om = None if omega is None else check_value(omega, OMEGA, "--omega")
         result = DesignResult.load(result_dir)
-        om = result.omega if omega is None else float(check_omega(omega, "--omega"))
+        om = result.omega if om is None else om
         path = out if out is not None else _result_folder(result_dir) / exporter.filename
         if path.suffix.lower() != exporter.suffix:
             raise InputError(f"--format {fmt} writes a {exporter.suffix} file, got {path}")
         exporter.write(path, result.pattern, om, **_export_options(result))
-    console.print(f"wrote {escape(str(path))}", highlight=False)
+    wrote(path)
 
 
 # --------------------------------------------------------------------------- render
@@ -546,7 +688,7 @@ def render(
                                       show_default=False),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder (default: "
                                        "RESULT_DIR)."),
-    frames: int = typer.Option(FRAMES, help="States in folding.gif."),
+    frames: int = typer.Option(FRAMES, help=f"States in folding.gif, 2 to {MAX_FRAMES}."),
     trust: bool = typer.Option(False, "--trust", help="Rebuild a target that names code "
                                "(python = ...) by running that code; without it such a "
                                "target is drawn as its lattice points."),
@@ -560,8 +702,14 @@ def render(
     from . import viz
 
     with user_errors():
-        _check_frames(frames)
+        check_path(result_dir, "RESULT_DIR")
+        check_path(out, "--out", output=True)
+        frames = check_frames(frames, 2)
         result = DesignResult.load(result_dir)
+        pat = result.pattern
+        memory.refuse_beyond(memory.gif_estimate(pat.N, pat.M, frames, viz.GIF_SIZE),
+                             f"rffqm render of {pat.N} x {pat.M} panels in {frames} states",
+                             "choose fewer --frames")
         ok, reason = viz.rendering_available()
         if not ok:
             raise RffqmError(f"cannot render: {reason}")
@@ -573,8 +721,7 @@ def render(
         else:
             with replace_folder(folder) as tmp:
                 _render_files(tmp, result, omega_end, frames, trust=trust)
-    console.print(f"wrote {escape(str(folder / 'render.png'))} and "
-                  f"{escape(str(folder / 'folding.gif'))}", highlight=False)
+    wrote(folder / "render.png", folder / "folding.gif")
 
 
 # --------------------------------------------------------------------------- view
@@ -585,25 +732,34 @@ def view_cmd(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="HTML file to write "
                                        "(default: RESULT_DIR/view.html)."),
     frames: int = typer.Option(FRAMES, help="Slider states from flat to folded flat (the "
-                               "designed state is added)."),
+                               f"designed state is added), 2 to {MAX_FRAMES}; states times "
+                               "pattern vertices at most rffqm_nlp.view.MAX_POINTS (2.5 "
+                               "million)."),
 ) -> None:
     """Write the interactive view of a saved design: one self-contained HTML page (plotly,
     works offline) with the folded pattern coloured by its distance to the target, its
     mountain and valley creases, a button for the target surface and a slider through the
     folding motion from flat to folded flat, the designed state marked.
+
+    The colours of vertices farther from the target than the designed state's farthest
+    (the top of the colour scale) come from a bounded search, an upper bound of their
+    distance (rffqm_nlp.view).
     """
     from . import view
 
     with user_errors():
-        _check_frames(frames)
+        check_path(result_dir, "RESULT_DIR")
+        check_path(out, "--out", output=True)
+        frames = check_frames(frames, 2)
         result = DesignResult.load(result_dir)
+        view.check_size(result.pattern.N, result.pattern.M, frames)
         path = out if out is not None else _result_folder(result_dir) / VIEW_FILE
         if path.suffix.lower() not in (".html", ".htm"):
             raise InputError(f"--out must name an .html file, got {path}")
         if not path.parent.is_dir():
             raise InputError(f"--out: no folder {path.parent} to write {path.name} into")
         view.write_html(result, path, frames=frames)
-    console.print(f"wrote {escape(str(path))}", highlight=False)
+    wrote(path)
 
 
 # --------------------------------------------------------------------------- targets
@@ -633,33 +789,28 @@ def targets() -> None:
 
 
 # --------------------------------------------------------------------------- march
-#: Bytes ``rffqm march`` holds at its peak per panel (the march, the fold and their JSON)
-#: and per panel and state of ``--frames``, on top of :data:`rffqm_nlp.memory.BASE`: an
-#: upper bound of the peaks measured from 200 to 1200 panels a side (docs/solvers.md,
-#: "Memory estimate")
-MARCH_MEMORY_PER_PANEL, MARCH_MEMORY_PER_FRAME = 2000.0, 300.0
-
-
 def march_memory(rows: int, cols: int, frames: int) -> float:
-    """Bytes ``rffqm march`` needs for rows x cols panels and ``frames`` states."""
-    return memory.BASE + (MARCH_MEMORY_PER_PANEL + MARCH_MEMORY_PER_FRAME * frames) * (
-        float(rows) * cols)
+    """Bytes ``rffqm march`` needs for rows x cols panels and ``frames`` states
+    (:func:`rffqm_nlp.memory.march_estimate`)."""
+    return memory.march_estimate(rows, cols, frames)
 
 
 @app.command()
 def march(
     out: Path = typer.Option(Path("runs/march"), help="Output folder."),
-    rows: int = typer.Option(10, min=1, help="Panel rows N."),
-    cols: int = typer.Option(10, min=1, help="Panel columns M."),
-    alpha0: float = typer.Option(1.2, help="Acute Miura angle (rad)."),
-    a: float = typer.Option(1.0, help="Miura side a (straight creases)."),
-    b: float = typer.Option(1.0, help="Miura side b (zig-zag creases)."),
+    rows: int = typer.Option(10, help="Panel rows N, 1 to 100000."),
+    cols: int = typer.Option(10, help="Panel columns M, 1 to 100000."),
+    alpha0: float = typer.Option(1.2, help="Acute Miura angle (rad), in (0, pi/2)."),
+    a: float = typer.Option(1.0, help="Miura side a (straight creases), 1e-6 to 1e6."),
+    b: float = typer.Option(1.0, help="Miura side b (zig-zag creases), 1e-6 to 1e6."),
     layout: str = typer.Option("zigzag_j", help=f"Miura layout: {', '.join(LAYOUTS)}."),
-    perturb: float = typer.Option(0.0, min=0.0, help="Perturb boundary angles by U(+-perturb)."),
-    seed: int = typer.Option(0, help="Seed of the perturbation."),
+    perturb: float = typer.Option(0.0, help="Perturb boundary angles by U(+-perturb), "
+                                  "0 to pi/2 (rad)."),
+    seed: int = typer.Option(0, help="Seed of the perturbation, 0 to 2^63 - 1."),
     lp: bool = typer.Option(False, help="Side lengths from the paper's LP (eq:linearP)."),
     omega: float = typer.Option(2.0, help="Fold parameter in [-pi, pi]."),
-    frames: int = typer.Option(0, min=0, help="Also write K states from flat to omega."),
+    frames: int = typer.Option(0, help="Also write K states from flat to omega, 0 (none) "
+                               f"to {MAX_FRAMES}."),
     force: bool = typer.Option(False, "--force", help="Replace a non-empty output folder "
                                "(the whole folder)."),
 ) -> None:
@@ -668,6 +819,15 @@ def march(
     from .lengths import length_spread, side_length_lp
 
     with user_errors():
+        check_path(out, "--out", output=True)
+        rows, cols = check_value(rows, PANELS, "--rows"), check_value(cols, PANELS, "--cols")
+        alpha0 = check_value(alpha0, ACUTE, "--alpha0")
+        a, b = check_value(a, SIDE, "--a"), check_value(b, SIDE, "--b")
+        layout = check_value(layout, Key("choice", choices=tuple(LAYOUTS)), "--layout")
+        perturb = check_value(perturb, PERTURB, "--perturb")
+        seed = check_value(seed, SEED, "--seed")
+        omega = check_value(omega, OMEGA, "--omega")
+        frames = check_frames(frames, 0)
         check_out_dir(out, force)
         memory.refuse_beyond(march_memory(rows, cols, frames),
                              f"rffqm march on {rows} x {cols} panels"

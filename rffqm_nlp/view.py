@@ -6,8 +6,18 @@ The page shows, in the target's frame (every state moved by the design's rigid m
 * the folded pattern as one shaded Mesh3d, two triangles per panel (the split of
   :func:`rffqm_nlp.export.triangles`), coloured by the distance of each pattern vertex to
   the target surface. The target surface is taken as the bilinear patches of the target
-  lattice, sampled :data:`TARGET_REFINE` times finer in each direction; a vertex's distance
-  is that to the nearest sample (scipy's cKDTree);
+  lattice, sampled :data:`TARGET_REFINE` times finer in each direction (fewer times where
+  that would make more than :data:`MAX_SAMPLES` samples: :func:`refinement`); a vertex's
+  distance is that to the nearest sample (scipy's cKDTree). The colour scale runs from 0
+  to the largest distance of the designed state, whose every distance is this one. So are
+  those of the other states within the colour scale, unless it spans more than
+  :data:`SCALE_STEPS` sample spacings (a design far from its target): then they are to
+  every s-th sample, too large by at most 1/:data:`SCALE_STEPS` of the scale
+  (:func:`scale_stride`). A vertex of another state beyond the scale, drawn in its top
+  colour whatever its distance, gets the distance to the nearest of at most
+  :data:`FAR_SAMPLES` samples (a sub-lattice) instead: an upper bound. (Searching every
+  sample for every vertex took over five minutes on a 300 x 300 design; this takes 2 s, or
+  up to about 30 s for a design far from its target.);
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
   designed omega (:func:`rffqm_nlp.foldfile.edge_assignments`);
@@ -20,8 +30,15 @@ The page shows, in the target's frame (every state moved by the design's rigid m
   steps restyle x, y, z (and the distances) of the mesh and crease traces; the triangle
   indices are sent once. (``Plotly.animate`` on 3D traces throws a page error.)
 
+Sizes are bounded before any work (:func:`check_size`): the page holds at most
+:data:`MAX_POINTS` vertex positions (slider states times pattern vertices). Before the
+distances, coordinates must lie within :data:`MAX_COORDINATE` and the folded states span
+at least :data:`MIN_RELATIVE_EXTENT` of their largest coordinate (else floating point
+cannot draw them). Anything else is one :class:`~rffqm_nlp.errors.InputError` line.
+
 Coordinates and distances are rounded to :data:`SIGNIFICANT` significant digits of the
-largest coordinate. plotly.js and the figure are stored gzip-compressed and
+largest coordinate, or of the folded states' extent when that keeps more decimals (a
+design far from the origin). plotly.js and the figure are stored gzip-compressed and
 base64-encoded in the page and unpacked by the browser (``DecompressionStream``), so the
 page works offline and stays small.
 """
@@ -40,14 +57,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
+from scipy.spatial import cKDTree
 
 from . import numpy_model
-from .errors import RffqmError
+from .errors import InputError, RffqmError
 from .export import COLORS, triangles
-from .files import write_text
+from .files import Key, check_value, write_text
 from .foldfile import edge_assignments
 from .pattern import motion_omegas
-from .shape import distances_to
 from .surfaces import Surface, grid_faces
 
 if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html_
@@ -58,12 +75,53 @@ if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html
 SIGNIFICANT = 4
 #: Refinement of the target lattice sampled for the distances.
 TARGET_REFINE = 8
+#: Most samples of the target (:func:`refinement`).
+MAX_SAMPLES = 2_000_000
+#: Most target samples that the distances of vertices beyond the colour scale are measured
+#: to (see the module).
+FAR_SAMPLES = 1024
+#: The other states' distances within the colour scale are measured to samples no farther
+#: apart than the scale over this (see the module).
+SCALE_STEPS = 64
+#: Most vertex positions (slider states times pattern vertices) in one page
+#: (:func:`check_size`): 25 states of a 315 x 315 design, about a minute and 2 GB
+#: (studies/results/march_memory.md).
+MAX_POINTS = 2_500_000
+#: Largest |coordinate| the page draws (distances of such points stay finite).
+MAX_COORDINATE = 1e150
+#: Smallest extent of the folded states, relative to their largest |coordinate|, that the
+#: page draws (finer shapes are lost to floating point).
+MIN_RELATIVE_EXTENT = 1e-11
 #: Label of the slider step at the designed omega.
 DESIGNED = "designed"
 #: Traces of :func:`figure`, in order: the folded mesh, the crease kinds, the target.
 TRACES = ("mesh", "M", "V", "B", "target")
 _KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _KIND_WIDTHS = {"M": 3, "V": 3, "B": 5}
+
+
+# --------------------------------------------------------------------------- sizes
+def check_size(N: int, M: int, frames: int) -> int:
+    """``frames`` (a whole number >= 2) unless the page of N x M panels with ``frames + 1``
+    slider states would hold more than :data:`MAX_POINTS` vertex positions: then one
+    :class:`InputError` line saying how many ``frames`` fit. Cheap: call it before any
+    work."""
+    frames = check_value(frames, Key("whole", low=2), "frames")
+    vertices = (int(N) + 1) * (int(M) + 1)
+    if (frames + 1) * vertices > MAX_POINTS:
+        most = max_frames(N, M)
+        fit = (f"choose --frames {most} or fewer" if most >= 2
+               else "a design this large has no view")
+        raise InputError(f"the view of {N} x {M} panels with {frames + 1} states would hold "
+                         f"{(frames + 1) * vertices} vertex positions, more than the "
+                         f"{MAX_POINTS} a page holds; {fit}")
+    return frames
+
+
+def max_frames(N: int, M: int) -> int:
+    """The most ``frames`` the view of N x M panels takes (:data:`MAX_POINTS`); below 2
+    when it has no view."""
+    return MAX_POINTS // ((int(N) + 1) * (int(M) + 1)) - 1
 
 
 # --------------------------------------------------------------------------- states
@@ -96,9 +154,122 @@ def target_samples(target_points: np.ndarray, refine: int = TARGET_REFINE) -> np
     return (1 - u) * (1 - v) * a + u * (1 - v) * b + (1 - u) * v * c + u * v * d
 
 
-def distances(points: np.ndarray, target_points: np.ndarray) -> np.ndarray:
-    """Distance of every point (..., 3) to the target surface (see the module), (...)."""
-    return distances_to(points, target_samples(target_points))
+def distances(points: np.ndarray, target_points: np.ndarray,
+              within: float | None = None) -> np.ndarray:
+    """Distance of every point (..., 3) to the target surface (see the module), (...): to
+    the nearest of :func:`target_samples` (:func:`refinement`). With ``within``, a point
+    farther than ``within`` gets the distance to the nearest of :func:`far_samples`
+    instead (an upper bound of its distance, so larger than ``within`` too), found without
+    searching every sample."""
+    if within is not None:
+        within = check_value(within, Key("number", low=0.0), "within")
+    samples = _samples(target_points)
+    P = np.asarray(points, dtype=float)
+    if P.shape[-1:] != (3,) or not np.all(np.isfinite(P)):
+        raise InputError(f"points must be finite points of shape (..., 3), got shape {P.shape}")
+    tree = _tree(samples.reshape(-1, 3))
+    if within is None:
+        d = _finite(tree.query(P.reshape(-1, 3))[0])
+    else:
+        d = _nearest(tree, samples, P.reshape(-1, 3), within)
+    return d.reshape(P.shape[:-1])
+
+
+def _finite(d: np.ndarray) -> np.ndarray:
+    """Distances ``d`` unless one overflowed."""
+    if not np.all(np.isfinite(d)):
+        raise InputError("the distances overflow: the points are too far from the target "
+                         "for floating point")
+    return d
+
+
+def refinement(target_points: np.ndarray) -> int:
+    """The refinement of the (n, m, 3) target lattice whose samples the distances are to:
+    :data:`TARGET_REFINE`, or the largest that keeps to :data:`MAX_SAMPLES` samples (at
+    least 1)."""
+    n, m = np.shape(target_points)[0] - 1, np.shape(target_points)[1] - 1
+    refine = TARGET_REFINE
+    while refine > 1 and (refine * n + 1) * (refine * m + 1) > MAX_SAMPLES:
+        refine -= 1
+    return refine
+
+
+def _samples(target_points: np.ndarray) -> np.ndarray:
+    """:func:`target_samples` (:func:`refinement`) of a target lattice of finite points."""
+    samples = target_samples(target_points, refinement(target_points))
+    if not np.all(np.isfinite(samples)):
+        raise InputError("the target lattice must hold finite points")
+    return samples
+
+
+def far_samples(samples: np.ndarray, most: int = FAR_SAMPLES) -> np.ndarray:
+    """At most ``most`` of the (n, m, 3) ``samples``, (k, 3): every s-th row and column and
+    the last ones, s the smallest stride that keeps to ``most``."""
+    n, m = samples.shape[:2]
+    stride = max(1, int(np.sqrt(n * m / most)))
+    while len(_every(n, stride)) * len(_every(m, stride)) > most and stride < max(n, m):
+        stride += 1
+    return samples[np.ix_(_every(n, stride), _every(m, stride))].reshape(-1, 3)
+
+
+def _tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree of the points (k, 3) for nearest-point queries from afar. Sliding
+    midpoint splits into uncompacted nodes, 64 points a leaf: the same answers as
+    cKDTree's defaults, 15 to 40 times faster for points away from a surface's samples
+    (studies/results/march_memory.md)."""
+    return cKDTree(points, leafsize=64, balanced_tree=False, compact_nodes=False)
+
+
+def _every(n: int, stride: int) -> np.ndarray:
+    return np.unique(np.r_[np.arange(0, n, stride), n - 1])
+
+
+def _nearest(tree: cKDTree, samples: np.ndarray, P: np.ndarray, within: float) -> np.ndarray:
+    """Distances of the points P (k, 3) to the samples of ``tree`` (``samples`` (n, m, 3))
+    for those within ``within``, to :func:`far_samples` for the others."""
+    d = tree.query(P, distance_upper_bound=within)[0]
+    far = ~np.isfinite(d)
+    if far.any():
+        d[far] = _tree(far_samples(samples)).query(P[far])[0]
+    return _finite(d)
+
+
+def state_distances(Y: np.ndarray, target_points: np.ndarray, at: int,
+                    slack: float = 0.0) -> np.ndarray:
+    """Distances of the vertices of the states Y (K, ..., 3) to the target, (K, n), as the
+    module says: those of state ``at`` (the designed one) to the nearest sample; those of
+    the other states within the colour scale (the largest of these plus ``slack``, its top
+    rounded up) to the nearest of every s-th sample, s the largest stride whose spacing
+    keeps to 1/:data:`SCALE_STEPS` of the scale (s = 1, every sample, unless the
+    scale spans more than that many sample spacings); beyond, as :func:`distances` with
+    ``within``."""
+    samples = _samples(target_points)
+    tree = _tree(samples.reshape(-1, 3))
+    P = np.asarray(Y, dtype=float).reshape(len(Y), -1, 3)
+    designed = _finite(tree.query(P[at])[0])
+    top = float(designed.max()) + slack
+    others = np.delete(np.arange(len(P)), at)
+    d = np.empty(P.shape[:2])
+    d[at] = designed
+    if others.size:
+        stride = scale_stride(samples, top)
+        if stride > 1:
+            n, m = samples.shape[:2]
+            tree = _tree(samples[np.ix_(_every(n, stride), _every(m, stride))].reshape(-1, 3))
+        d[others] = _nearest(tree, samples, P[others].reshape(-1, 3),
+                             top).reshape(len(others), -1)
+    return d
+
+
+def scale_stride(samples: np.ndarray, scale: float) -> int:
+    """The largest stride s >= 1 such that each of the (n, m, 3) ``samples`` lies within
+    ``scale`` / :data:`SCALE_STEPS` of one of every s-th sample in each direction (and the
+    last): s times the largest distance of two neighbouring samples at most that."""
+    step = max(float(np.max(np.linalg.norm(np.diff(samples, axis=a), axis=-1), initial=0.0))
+               for a in (0, 1))
+    if step <= 0:
+        return 1
+    return max(1, min(int(scale / (SCALE_STEPS * step)), max(samples.shape[:2])))
 
 
 # --------------------------------------------------------------------------- creases
@@ -129,14 +300,46 @@ def crease_paths(pat: Pattern, omega: float) -> dict[str, np.ndarray]:
 
 # --------------------------------------------------------------------------- figure
 def _decimals(Y: np.ndarray) -> int:
-    """Decimal places keeping :data:`SIGNIFICANT` digits of the largest |coordinate|."""
+    """Decimal places keeping :data:`SIGNIFICANT` digits of the largest |coordinate|, or of
+    the extent of Y when that keeps more."""
     scale = float(np.max(np.abs(Y))) or 1.0
-    return int(SIGNIFICANT - 1 - np.floor(np.log10(scale)))
+    extent = _extent(Y) or scale
+    return int(SIGNIFICANT - 1 - np.floor(np.log10(min(scale, extent))))
+
+
+def _extent(Y: np.ndarray) -> float:
+    """The largest side of the box around the points Y (..., 3)."""
+    pts = Y.reshape(-1, 3)
+    return float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+
+
+def _rounded(a: np.ndarray, decimals: int) -> np.ndarray:
+    """``a`` rounded to ``decimals`` places, or left as it is where rounding overflows (a
+    number too large for that many decimals has none to round)."""
+    a = np.asarray(a, dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = np.round(a, decimals)
+    return np.where(np.isfinite(r) | np.isnan(a), r, a)
 
 
 def _listed(a: np.ndarray, decimals: int) -> list:
     """``a`` rounded, as a list with None for NaN (a break in a line)."""
-    return [None if x != x else x for x in np.round(a, decimals).tolist()]
+    return [None if x != x else x for x in _rounded(a, decimals).tolist()]
+
+
+def _check_coordinates(Y: np.ndarray, *others: np.ndarray) -> None:
+    """Refuse, in one line, states Y (and the target's points ``others``) with a coordinate
+    beyond :data:`MAX_COORDINATE`, or states spanning less than :data:`MIN_RELATIVE_EXTENT`
+    of their largest coordinate."""
+    largest = max(float(np.max(np.abs(a))) if np.size(a) else 0.0 for a in (Y, *others))
+    if not largest <= MAX_COORDINATE:
+        raise InputError(f"the view draws coordinates up to {MAX_COORDINATE:g} in size; this "
+                         f"design and its target reach {largest:.3g}")
+    scale = float(np.max(np.abs(Y)))
+    if not _extent(Y) > MIN_RELATIVE_EXTENT * scale:
+        raise InputError(f"the folded states span {_extent(Y):.3g} at coordinates of "
+                         f"{scale:.3g}: too small a shape that far from the origin for "
+                         "floating point to draw")
 
 
 def _coordinates(P: np.ndarray, paths: dict[str, np.ndarray], decimals: int) -> dict:
@@ -183,7 +386,7 @@ def _target_shape(result: DesignResult, target: Surface | None
 
 
 def _target(vertices: np.ndarray, faces: np.ndarray, decimals: int) -> dict:
-    r = np.round(vertices, decimals)
+    r = _rounded(vertices, decimals)
     return {"type": "mesh3d", "x": r[:, 0].tolist(), "y": r[:, 1].tolist(),
             "z": r[:, 2].tolist(), "i": faces[:, 0].tolist(), "j": faces[:, 1].tolist(),
             "k": faces[:, 2].tolist(), "name": "target", "visible": False, "opacity": 0.45,
@@ -219,17 +422,20 @@ def spec(result: DesignResult, frames: int = 24, target: Surface | None = None) 
     """The figure of ``result`` as plain plotly JSON {"data", "layout"}: the traces in the
     order of :data:`TRACES`, a slider with ``frames + 1`` steps (see :func:`slider_omegas`)
     starting at the designed state, and a button that shows and hides the target
-    (``target``, or the result's: see :func:`_target_shape`)."""
+    (``target``, or the result's: see :func:`_target_shape`). Sizes and coordinates are
+    checked as the module says (:func:`check_size` first, before any work)."""
     omega = float(result.omega)
-    omegas, at = slider_omegas(omega, frames)
     pat = result.pattern
+    check_size(pat.N, pat.M, frames)
+    omegas, at = slider_omegas(omega, frames)
     Y = states(result, omegas)
     T = np.asarray(result.target_points, dtype=float)
     S, faces = _target_shape(result, target)
+    _check_coordinates(Y, T, S)
     decimals = _decimals(Y)
     paths = crease_paths(pat, omega)
-    dist = distances(Y, T).reshape(len(omegas), -1)
-    cmax = float(np.round(dist[at].max(), decimals)) or 10.0 ** -decimals
+    dist = state_distances(Y, T, at, slack=10.0 ** -decimals)
+    cmax = float(_rounded(dist[at].max(), decimals)) or 10.0 ** -decimals
     steps = []
     for n, w in enumerate(omegas):
         xyz = _coordinates(Y[n].reshape(-1, 3), paths, decimals)

@@ -293,8 +293,12 @@ def render_png(path: str | os.PathLike, pat: Pattern, omega: float,
     return Path(path)
 
 
+#: Size (width, height) in pixels of the frames of :func:`folding_gif`.
+GIF_SIZE = (480, 360)
+
+
 def folding_gif(path: str | os.PathLike, pat: Pattern, omega_end: float, frames: int = 24,
-                size: tuple[int, int] = (480, 360), duration_ms: int = 80) -> Path:
+                size: tuple[int, int] = GIF_SIZE, duration_ms: int = 80) -> Path:
     """A looping GIF of the folding motion from flat (omega = 0) to ``omega_end``, in
     ``frames`` states, coloured by height z with one colour scale for the whole motion."""
     omegas = motion_omegas(omega_end, frames, minimum=2)
