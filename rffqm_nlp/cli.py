@@ -91,8 +91,10 @@ FRAMES = 24
 VIEW_FILE = "view.html"
 CURVATURE_FILE = "curvature.png"
 #: Help of the --trust option of the commands that read a target file.
-TRUST_HELP = ("Run the code that the target file names (python = \"file.py:function\" or "
-              "\"package.module:function\"); only for files you trust.")
+TRUST_HELP = ("Let the file run the code its target names (python = \"file.py:function\" or "
+              "\"package.module:function\"), name files and libraries for IPOPT "
+              "(output_file, hsllib, ...) and name files outside its folder; only for files "
+              "you trust (docs/files_from_others.md).")
 #: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
 DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
 #: Most states of any --frames (fold, render, view, march).
@@ -546,7 +548,7 @@ def _check_table(report, source: Path) -> Table:
 @app.command("sweep")
 def sweep_cmd(
     study: Path = typer.Argument(..., help="Study file (TOML): a base design and the "
-                                 "parameters to sweep, e.g. studies/sweep_example.toml.",
+                                 "parameters to sweep, e.g. targets/sweep_example.toml.",
                                  show_default=False),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder; an existing one is "
                              "resumed (finished designs are skipped).", show_default=False),

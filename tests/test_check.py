@@ -117,7 +117,7 @@ def test_check_a_fold_file_in_contact_exits_1_with_the_pairs(tmp_path):
 @pytest.mark.parametrize("args, fragment", [
     (["missing"], "no design result"),
     (["missing.fold"], "no FOLD file"),
-    (["{run}", "--clearance", "-1"], "--clearance must be a finite distance >= 0"),
+    (["{run}", "--clearance", "-1"], "--clearance must be a finite number >= 0, got the number -1"),
     (["{run}", "--omega", "4"], "--omega"),
 ])
 def test_check_bad_input_exits_2_in_one_line(result, tmp_path, args, fragment):
