@@ -22,7 +22,7 @@ from .collisions import CollisionReport, collisions
 _SUBMODULES = ("numpy_model", "marching", "vertex", "boundary", "pattern", "backend", "errors",
                "lengths", "surfaces", "meshes", "shape", "curvature", "design", "transcription",
                "reduced", "stencils", "clearance", "results", "files", "foldfile", "export",
-               "viz", "view", "cli", "sweeps", "memory")
+               "viz", "view", "cli", "sweeps", "memory", "ipopt_options")
 
 
 def __getattr__(name: str):

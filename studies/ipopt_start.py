@@ -74,7 +74,7 @@ def solve(name: str, n: int, config: str) -> dict:
     """One design in a fresh subprocess, IPOPT's factorisations read from its log."""
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ipopt.out"
-        r = solve_in_child(name, n, solve={**SOLVE, "ipopt_options": {
+        r = solve_in_child(name, n, solve={**SOLVE, "trust": True, "ipopt_options": {
             **CONFIGS[config], "output_file": str(log), "file_print_level": 6}})
         out = {"status": r["status"], "iterations": r["iterations"],
                "rms": (r["fit"] or {}).get("rms"), "wall": r["wall"]}

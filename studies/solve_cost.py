@@ -54,6 +54,7 @@ def solve(name: str, n: int, transcription: str, hessian: str,
         options = {"transcription": transcription, "solver": LM if hessian == LM else "ipopt",
                    "hessian": "exact" if hessian == LM else hessian, "stop_rms": STOP_RMS,
                    "time_limit": time_limit or TIME_LIMIT.get(n, LARGE_TIME_LIMIT),
+                   "trust": True,            # the log file is ours: IPOPT may write it
                    "ipopt_options": {"output_file": str(log), "file_print_level": 6,
                                      "file_append": "yes",  # both runs of a handover
                                      "print_timing_statistics": "yes"}}
