@@ -16,7 +16,7 @@ abc``, a path with a NUL character) are refused by typer itself, with its messag
 line and exit status 2. Numeric options are checked by :func:`rffqm_nlp.files.check_value`
 against the ranges their help says, and sizes before any work: at most :data:`MAX_FRAMES`
 states for any ``--frames``, the memory estimates of ``march``, ``fold`` and ``render``
-(:mod:`rffqm_nlp.memory`), and the page size of ``view`` (:func:`rffqm_nlp.view.check_size`).
+(:mod:`rffqm_nlp.memory`), and the page size of ``view`` (:func:`rffqm_nlp.show.view.check_size`).
 
 Files are written atomically; ``design`` and ``march`` write their folder into a staging
 folder next to it and replace the output folder whole only when every file succeeded
@@ -44,15 +44,15 @@ from rich.table import Table
 from typer.core import TyperCommand, TyperGroup
 
 from . import memory
-from .boundary import LAYOUTS, miura_boundary, perturb_angles
+from .model.boundary import LAYOUTS, miura_boundary, perturb_angles
 from .errors import InputError, RffqmError, one_line, safe_text
-from .export import EXPORTERS
+from .io.export import EXPORTERS
 from .files import Key, check_out_dir, check_value, jsonable, replace_folder, write_json
-from .pattern import motion_omegas
-from .results import DesignResult
+from .model.pattern import motion_omegas
+from .design.results import DesignResult
 
 if TYPE_CHECKING:
-    from .design import DesignProblem, SolveOptions
+    from .design.problem import DesignProblem, SolveOptions
 
 
 class _OneLineErrors(TyperGroup):
@@ -87,7 +87,7 @@ console = Console(stderr=True)
 
 #: Folding states stored in pattern.fold and drawn in folding.gif by ``design``.
 FRAMES = 24
-#: The interactive view (rffqm_nlp.view) and the curvature maps that ``design`` writes.
+#: The interactive view (rffqm_nlp.show.view) and the curvature maps that ``design`` writes.
 VIEW_FILE = "view.html"
 CURVATURE_FILE = "curvature.png"
 #: Help of the --trust option of the commands that read a target file.
@@ -95,7 +95,7 @@ TRUST_HELP = ("Let the file run the code its target names (python = \"file.py:fu
               "\"package.module:function\"), name files and libraries for IPOPT "
               "(output_file, hsllib, ...) and name files outside its folder; only for files "
               "you trust (docs/files_from_others.md).")
-#: Formats of :data:`rffqm_nlp.export.EXPORTERS` that ``design`` writes.
+#: Formats of :data:`rffqm_nlp.io.export.EXPORTERS` that ``design`` writes.
 DESIGN_FORMATS = ("fold", "svg", "pdf", "dxf", "obj", "glb")
 #: Most states of any --frames (fold, render, view, march).
 MAX_FRAMES = 1000
@@ -118,7 +118,7 @@ PANELS = Key("whole", low=1, high=100_000)
 
 def _version(value: bool) -> None:
     if value:
-        from . import __version__
+        from ._version import __version__
 
         typer.echo(f"rffqm-nlp {__version__}")
         raise typer.Exit()
@@ -251,12 +251,12 @@ def _pattern_frame(points: np.ndarray, result: "DesignResult") -> np.ndarray:
 
 
 def _target_for_render(result: "DesignResult", target=None, trust: bool = False):
-    """The target of :func:`rffqm_nlp.results.target_mesh` moved into the pattern frame, or
+    """The target of :func:`rffqm_nlp.design.results.target_mesh` moved into the pattern frame, or
     the target lattice points (with a warning) when it cannot be rebuilt (the target names
     code and ``trust`` is not given)."""
     import trimesh
 
-    from .results import target_mesh
+    from .design.results import target_mesh
 
     try:
         mesh = target_mesh(result, target, trust)
@@ -277,7 +277,7 @@ def _export_options(result: "DesignResult") -> dict:
 
 def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames: int,
                   target=None, trust: bool = False) -> None:
-    from . import viz
+    from .show import pictures as viz
 
     viz.render_png(folder / "render.png", result.pattern, result.omega,
                    target=_target_for_render(result, target, trust),
@@ -288,7 +288,7 @@ def _render_files(folder: Path, result: "DesignResult", omega_end: float, frames
 def _contacts(result: "DesignResult"):
     """The collision report of a design whose fit says it is not collision-free (for
     render.png to mark the panels in contact), else None."""
-    from .collisions import collisions
+    from .contact.collisions import collisions
 
     return None if result.fit.collision_free is not False else collisions(result.pattern,
                                                                           result.omega)
@@ -334,8 +334,8 @@ def design(
     in the pattern's frame (x_a^11 = 0); result.json and view.html hold the folded state
     aligned onto the target.
     """
-    from . import viz
-    from .design import SOLVE_KEYS, check_memory, load_design
+    from .show import pictures as viz
+    from .design.problem import SOLVE_KEYS, check_memory, load_design
 
     with user_errors():
         check_path(target, "TARGET")
@@ -404,7 +404,8 @@ def _solve_logged(problem: "DesignProblem", options: "SolveOptions",
 
 def _write_design(folder: Path, result: "DesignResult", problem: "DesignProblem") -> None:
     """Every output file of ``design`` into ``folder``."""
-    from . import view, viz
+    from .show import view
+    from .show import pictures as viz
 
     pat, omega = result.pattern, result.omega
     result.save(folder)
@@ -497,7 +498,7 @@ def check_cmd(
     to omega, and the pairs in contact there (1-based (i, j) panels). Exit status 0 when
     the motion is free, 1 when it is not, 2 on bad input.
     """
-    from .collisions import collisions
+    from .contact.collisions import collisions
 
     with user_errors():
         check_path(source, "SOURCE")
@@ -516,7 +517,7 @@ def check_cmd(
 def _design_to_check(source: Path) -> tuple:
     """(pattern, omega) of a FOLD file (by its suffix .fold) or a saved design result."""
     if source.suffix.lower() == ".fold":
-        from .foldfile import read_fold
+        from .io.foldfile import read_fold
 
         pattern, omega, _ = read_fold(source)
         return pattern, omega
@@ -533,7 +534,7 @@ def _pairs_text(pairs: list) -> str:
 
 
 def _check_table(report, source: Path) -> Table:
-    """The ``check`` summary of a :class:`~rffqm_nlp.collisions.CollisionReport`."""
+    """The ``check`` summary of a :class:`~rffqm_nlp.contact.collisions.CollisionReport`."""
     first = "none" if report.first_omega is None else f"{report.first_omega:.6g}"
     return quantity_table(f"self-contact: {source}", [
         ("motion checked", f"omega from 0 to {report.omega_max:.6g}"),
@@ -617,7 +618,7 @@ def fold_cmd(
     Writes JSON {"omega": w or [w...], "frame": "pattern" or "target", "Y": ...} with Y of
     shape (2N+1, 2M+1, 3), or (K, 2N+1, 2M+1, 3) for --frames.
     """
-    from . import marching
+    from .model import marching
 
     with user_errors():
         check_path(result_dir, "RESULT_DIR")
@@ -701,7 +702,7 @@ def render(
     Into an existing folder (the result's, by default) each file is written atomically and
     nothing else changes; a new folder appears complete or not at all.
     """
-    from . import viz
+    from .show import pictures as viz
 
     with user_errors():
         check_path(result_dir, "RESULT_DIR")
@@ -735,7 +736,7 @@ def view_cmd(
                                        "(default: RESULT_DIR/view.html)."),
     frames: int = typer.Option(FRAMES, help="Slider states from flat to folded flat (the "
                                f"designed state is added), 2 to {MAX_FRAMES}; states times "
-                               "pattern vertices at most rffqm_nlp.view.MAX_POINTS (2.5 "
+                               "pattern vertices at most rffqm_nlp.show.view.MAX_POINTS (2.5 "
                                "million)."),
 ) -> None:
     """Write the interactive view of a saved design: one self-contained HTML page (plotly,
@@ -745,9 +746,9 @@ def view_cmd(
 
     The colours of vertices farther from the target than the designed state's farthest
     (the top of the colour scale) come from a bounded search, an upper bound of their
-    distance (rffqm_nlp.view).
+    distance (rffqm_nlp.show.view).
     """
-    from . import view
+    from .show import view
 
     with user_errors():
         check_path(result_dir, "RESULT_DIR")
@@ -772,7 +773,7 @@ def targets() -> None:
     Use one in a design file as [target] name = "<surface>" plus any parameters and
     domain = [[u0, u1], [v0, v1]].
     """
-    from . import surfaces
+    from .targets import surfaces
 
     table = Table(title="built-in target surfaces", show_lines=True)
     table.add_column("name", style="bold", no_wrap=True)
@@ -817,8 +818,8 @@ def march(
                                "(the whole folder)."),
 ) -> None:
     """March a (perturbed) Miura crease pattern and fold it; write the pattern and vertices."""
-    from . import marching
-    from .lengths import length_spread, side_length_lp
+    from .model import marching
+    from .model.lengths import length_spread, side_length_lp
 
     with user_errors():
         check_path(out, "--out", output=True)

@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import unicodedata
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from .results import SolveStats
+from typing import Any
 
 
 #: Longest word (a run without spaces, e.g. a path) a message shows whole; a longer one
@@ -117,7 +114,7 @@ class InfeasibleDesign(RffqmError):
 class SolverFailed(RffqmError):
     """IPOPT (or another solver) did not succeed; carries its status and the last iterate.
 
-    ``stats`` is the design solve's :class:`~rffqm_nlp.results.SolveStats` (None for the
+    ``stats`` is the design solve's :class:`~rffqm_nlp.design.results.SolveStats` (None for the
     other solves, e.g. the side-length NLP, whose message says the status and iterations).
     ``best_iterate`` is the feasible point with the smallest objective the solver visited
     (for the simultaneous design NLP, an iterate's boundary data re-marched; None when it
@@ -125,7 +122,7 @@ class SolverFailed(RffqmError):
     """
 
     def __init__(
-        self, message: str, status: str = "", stats: "SolveStats | None" = None,
+        self, message: str, status: str = "", stats: Any = None,
         last_iterate: Any = None, best_iterate: Any = None,
     ):
         super().__init__(message)
@@ -136,7 +133,7 @@ class SolverFailed(RffqmError):
 
 
 def raise_for_ipopt(status: str, iterations: int, what: str, infeasible_hint: str,
-                    failed_hint: str, stats: "SolveStats | None" = None,
+                    failed_hint: str, stats: Any = None,
                     last_iterate: Any = None, best_iterate: Any = None) -> None:
     """Raise the named error for an unsuccessful IPOPT solve of ``what``.
 

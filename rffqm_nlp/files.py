@@ -91,7 +91,7 @@ def read_json(path: str | os.PathLike, what: str = "file",
     files over :data:`MAX_JSON_BYTES`, text that is not UTF-8), invalid JSON (by line
     and column) and whole numbers of more than :data:`MAX_JSON_DIGITS` digits. NaN,
     Infinity and 1e999 are read as floats, for the reader of each kind of file to refuse
-    naming their place (:func:`rffqm_nlp.results.check_numbers`).
+    naming their place (:func:`rffqm_nlp.design.results.check_numbers`).
     """
     try:
         text = _read_text(path, what, error, MAX_JSON_BYTES, "JSON")

@@ -1,7 +1,7 @@
 """What this machine can hold: the memory still available to this process, and the one-line
 refusal, before any work, of a computation whose estimate exceeds it (the design solve,
-:func:`rffqm_nlp.design.check_memory`; the side-length programs,
-:func:`rffqm_nlp.lengths.check_memory`; ``rffqm march``)."""
+:func:`rffqm_nlp.design.problem.check_memory`; the side-length programs,
+:func:`rffqm_nlp.model.lengths.check_memory`; ``rffqm march``)."""
 
 from __future__ import annotations
 

@@ -35,7 +35,7 @@ existing scheduler by address, or serially in this process with ``scheduler="non
 the same task function :func:`solve_design`) and streams the outcomes into ``OUT``:
 
 * ``designs/<id>/row.json``: the design's table row and configuration, written last;
-* ``designs/<id>/result.json``: the :class:`~rffqm_nlp.results.DesignResult` of a solved design;
+* ``designs/<id>/result.json``: the :class:`~rffqm_nlp.design.results.DesignResult` of a solved design;
 * ``results.parquet`` and ``results.csv``: one row per finished design, rewritten
   atomically as each design finishes; in the CSV every text cell that a spreadsheet would
   read as a formula is prefixed with ``'`` (:func:`csv_frame`), the Parquet file keeps the
@@ -74,13 +74,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from threadpoolctl import OpenBLASController, register, threadpool_limits
 
-from .design import FILE_KEYS, SOLVE_KEYS, DesignProblem, SolveOptions, check_memory
-from .design import from_config as problem_from_config
+from .design.problem import FILE_KEYS, SOLVE_KEYS, DesignProblem, SolveOptions, check_memory
+from .design.problem import from_config as problem_from_config
 from .errors import InfeasibleDesign, InputError, RffqmError, SolverFailed, one_line
 from .files import (Key, atomic_path, check_table, check_value, describe_value, named_path,
                     read_json, read_toml, shown_name, write_json)
-from .surfaces import resolve_reference
-from .results import DesignResult, Fit, SolveStats
+from .targets.surfaces import resolve_reference
+from .design.results import DesignResult, Fit, SolveStats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -211,7 +211,7 @@ class Study:
     ``sample``: draw this many designs instead of the grid, with ``seed``; ``source``: the
     study file, named in the errors of :meth:`designs`; ``root``: the folder that a target's
     ``python = "file.py:function"`` is relative to; ``trust``: run the code a target names
-    (refused without it, see :func:`rffqm_nlp.surfaces.from_config`).
+    (refused without it, see :func:`rffqm_nlp.targets.surfaces.from_config`).
     """
 
     base: dict[str, Any]
@@ -467,12 +467,12 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
     """The full configuration {"target", "design", "solve"} of ``base`` with the dotted
     ``overrides`` applied, every default filled in (via :class:`DesignProblem` and
     :class:`SolveOptions`), validated, and refused when this machine cannot hold its solve
-    (:func:`rffqm_nlp.design.check_memory`). ``name`` names the design in the errors, as it
+    (:func:`rffqm_nlp.design.problem.check_memory`). ``name`` names the design in the errors, as it
     is: a design's name is made of safe pieces (:meth:`Study.designs`).
 
     Setting target.name or target.python starts the target table afresh; an integer p as
     design.panels means (p, p); ``root`` and ``trust`` as for
-    :func:`rffqm_nlp.design.from_config`.
+    :func:`rffqm_nlp.design.problem.from_config`.
     """
     tables = {table: dict(base.get(table, {})) for table in TABLES}
     if "target.name" in overrides or "target.python" in overrides:

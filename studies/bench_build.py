@@ -1,5 +1,5 @@
 """Build time of the simultaneous NLP: CasADi's Hessian of the Lagrangian against the one
-assembled around the global variables (:func:`rffqm_nlp.transcription.lagrangian_hessian`).
+assembled around the global variables (:func:`rffqm_nlp.design.transcription.lagrangian_hessian`).
 
 The sphere cap (targets/sphere_cap.toml) at n x n panels: transcription plus
 ``ca.nlpsol`` with IPOPT (all derivative functions generated), each build in a fresh
@@ -21,7 +21,7 @@ from pathlib import Path
 import casadi as ca
 
 from common import RESULTS, Run, add_smoke, run_child, smoke_dir, target_problem
-from rffqm_nlp import transcription
+from rffqm_nlp.design import transcription
 
 METHODS = ("casadi", "assembled")
 

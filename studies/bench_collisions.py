@@ -52,14 +52,14 @@ from pathlib import Path
 import numpy as np
 
 import rffqm_nlp as rq
-from rffqm_nlp import numpy_model as nm
-from rffqm_nlp.collisions import collisions
+from rffqm_nlp.model import numpy_model as nm
+from rffqm_nlp.contact.collisions import collisions
 from rffqm_nlp.errors import MarchingError
-from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.model.lengths import side_length_lp
 
 ROOT = Path(__file__).resolve().parent.parent
 #: the module (the package's ``collisions`` is the function)
-contact = importlib.import_module("rffqm_nlp.collisions")
+contact = importlib.import_module("rffqm_nlp.contact.collisions")
 COLUMNS = ("panels", "pattern", "omega*", "march+fold [s]", "collisions [s]", "ratio",
            "one fit [s]", "one fit / tiles", "same", "check peak [MB]", "free", "first_omega")
 LP_COLUMNS = ("seed", "omega*", "collisions [s]", "check peak [MB]", "free", "first_omega")

@@ -5,7 +5,7 @@ optimality conditions at ``tol``) at N x N panels (default 20) it solves, each i
 process with the given numbers of OpenBLAS threads (default 1 and 2):
 
 * ``default``: ``problem.solve(options)`` with the file's options, i.e. Levenberg-Marquardt
-  on the marching manifold alone (:mod:`rffqm_nlp.reduced`);
+  on the marching manifold alone (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`);
 * ``ipopt``: the same with ``solver="ipopt"`` (exact Hessian);
 * ``baseline``: the default solve of the code at ``--baseline`` (a git revision, exported
   to a temporary folder with ``git archive``; default: the commit before this solver),
@@ -61,8 +61,10 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
 from common import (RESULTS, TARGETS, Run, add_smoke, export_package, fmt,  # noqa: E402
                     run_child, smoke_dir, solve_in_child, solve_problem, target_problem,
                     write_table)
-from rffqm_nlp import DesignProblem, SolveOptions, numpy_model, surfaces  # noqa: E402
-from rffqm_nlp.surfaces import Surface  # noqa: E402
+from rffqm_nlp import DesignProblem, SolveOptions  # noqa: E402
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.targets import surfaces
+from rffqm_nlp.targets.surfaces import Surface  # noqa: E402
 
 #: the commit before Levenberg-Marquardt ran to the optimality conditions by itself
 BASELINE = "0f9ad8d"

@@ -6,10 +6,10 @@ For N x N panels (default 10, 100, 300, 1000) it times, in one run,
 * ``fold``         one folded state (omega = 0.5),
 * ``fold (K w)``   K folded states (default K = 100 omegas in [-pi, pi]),
 
-for the CasADi graph of :mod:`rffqm_nlp.marching` (graph build = first call of
+for the CasADi graph of :mod:`rffqm_nlp.model.marching` (graph build = first call of
 ``pattern_function`` / ``fold_function`` with every lru_cache of the module cleared;
 evaluation = best of ``--repeat`` calls of ``march`` / ``fold``), the NumPy model
-:mod:`rffqm_nlp.numpy_model`, and the per-panel loop of ``tests/forward_oracle.py``.
+:mod:`rffqm_nlp.model.numpy_model`, and the per-panel loop of ``tests/forward_oracle.py``.
 The input is a Miura-ori (alpha0 = 1.2, a = b = 1) with boundary angles perturbed by
 1e-3*pi, or the largest smaller amplitude that still marches with Miura lengths.
 
@@ -43,8 +43,8 @@ sys.path.insert(0, str(ROOT))
 
 import rffqm_nlp as rq  # noqa: E402
 from common import Run, add_smoke, smoke_dir  # noqa: E402
-from rffqm_nlp import marching as mg  # noqa: E402
-from rffqm_nlp import numpy_model as nm  # noqa: E402
+from rffqm_nlp.model import marching as mg  # noqa: E402
+from rffqm_nlp.model import numpy_model as nm  # noqa: E402
 from tests.forward_oracle import fold_loop, march_loop  # noqa: E402
 
 AMPLITUDES = (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6)   # times pi
@@ -117,7 +117,7 @@ def best_of(fn, repeat: int):
 
 
 def clear_casadi_caches() -> None:
-    """Empty every lru_cache of rffqm_nlp.marching (pattern/fold functions, their parts)."""
+    """Empty every lru_cache of rffqm_nlp.model.marching (pattern/fold functions, their parts)."""
     for obj in vars(mg).values():
         if callable(getattr(obj, "cache_clear", None)):
             obj.cache_clear()

@@ -39,9 +39,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from common import RESULTS, Run, add_smoke, fmt, smoke_dir, solve_in_child, target_problem
-from rffqm_nlp import numpy_model, shape
-from rffqm_nlp.boundary import BoundaryData
-from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.targets import shape
+from rffqm_nlp.model.boundary import BoundaryData
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions
 from rffqm_nlp.errors import RffqmError
 
 TARGET = "sphere_cap"  # a bundled target file, targets/<TARGET>.toml

@@ -44,7 +44,7 @@ from scipy.spatial import Delaunay
 
 import rffqm_nlp as rq
 from common import RESULTS, STOP_RMS, TARGETS, Run, add_smoke, smoke_dir, target_problem
-from rffqm_nlp import shape
+from rffqm_nlp.targets import shape
 
 #: Goals of issue 19: RMS against the parametric design's, absolute and against the plane,
 #: time against the parametric design's.

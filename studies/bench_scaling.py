@@ -31,7 +31,7 @@ import os
 from pathlib import Path
 
 from common import RESULTS, ROOT, Run, add_smoke, fmt, smoke_dir, solve_in_child
-from rffqm_nlp.design import HESSIANS, SOLVERS
+from rffqm_nlp.design.problem import HESSIANS, SOLVERS
 
 TARGET = "sphere_cap"
 LAYOUT = "zigzag_i"

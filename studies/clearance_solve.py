@@ -31,7 +31,7 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
 
 from common import (RESULTS, Run, add_smoke, export_package, fmt,  # noqa: E402
                     run_child, smoke_dir, target_problem, write_table)
-from rffqm_nlp.clearance import closest  # noqa: E402
+from rffqm_nlp.design.clearance import closest  # noqa: E402
 from rffqm_nlp.errors import SolverFailed  # noqa: E402
 
 #: the commit before Levenberg-Marquardt restored a start that breaks a constraint

@@ -2,7 +2,7 @@
 smoothing weight lambda?
 
 For each bundled surface: its 60 x 60 sample plus Gaussian noise of 0.2% of the diameter
-(sigma), fitted by rffqm_nlp.meshes.Mesh with several lambda (the package's default
+(sigma), fitted by rffqm_nlp.targets.meshes.Mesh with several lambda (the package's default
 CLOUD_SMOOTHING among them). Reported: the RMS and max distance of the fitted surface (a
 30 x 30 grid over its domain) to the true surface over sigma (below 1: the fit removes
 noise), the spline's RMS deviation from the noisy points over sigma (about 1: it follows the
@@ -23,7 +23,7 @@ import numpy as np
 
 import rffqm_nlp as rq
 from common import RESULTS, Run, add_smoke, smoke_dir, write_table
-from rffqm_nlp import meshes
+from rffqm_nlp.targets import meshes
 
 SURFACES = ["sphere_cap", "hyperboloid", "quarter_vase", "saddle", "torus_patch",
             "gaussian_bump"]

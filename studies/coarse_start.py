@@ -4,7 +4,7 @@ A bundled target (``--target``, default the sphere cap) at n x n panels for each
 ``--sizes``, solved to ``--stop-rms`` (default 0.9% RMS/diameter) with the target file's
 options, twice in the same process: from the Miura-ori, and from the design of n / ``--ratio``
 panels a side (itself solved from its Miura first) carried to n x n
-(``DesignProblem.solve(warm_start=coarser result)``, :func:`rffqm_nlp.boundary.refine`).
+(``DesignProblem.solve(warm_start=coarser result)``, :func:`rffqm_nlp.model.boundary.refine`).
 The table gives each run's iterations, its first and last loss, its fit and wall time, and
 the carried run's time, alone and with the coarse solve, over the Miura start's.
 
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, fmt, smoke_dir,
                     target_problem, write_table)
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.design.results import DesignResult
 
 
 def timed(problem, options, warm_start: DesignResult | None = None

@@ -26,9 +26,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from rffqm_nlp.design import DesignProblem, SolveOptions, load_design
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions, load_design
 from rffqm_nlp.errors import RffqmError, SolverFailed
-from rffqm_nlp.results import SolveStats
+from rffqm_nlp.design.results import SolveStats
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "studies" / "results"

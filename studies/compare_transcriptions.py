@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem, write_table
-from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions
 from rffqm_nlp.errors import RffqmError
 from rffqm_nlp.sweeps import one_thread
 

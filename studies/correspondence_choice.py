@@ -45,7 +45,7 @@ import rffqm_nlp as rq
 from bench_mesh_targets import grid_obj
 from common import (RESULTS, ROOT, TARGETS, Run, add_smoke, export_package, fmt, smoke_dir,
                     solve_in_child, target_problem, write_table)
-from rffqm_nlp import transcription
+from rffqm_nlp.design import transcription
 
 MODES = ("lattice", "free")
 #: the mesh targets: bundled targets whose surface is written as grid.obj

@@ -33,7 +33,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from common import RESULTS, ROOT, Run, add_smoke, smoke_dir  # noqa: E402
-from rffqm_nlp import surfaces, sweeps  # noqa: E402
+from rffqm_nlp import sweeps  # noqa: E402
+from rffqm_nlp.targets import surfaces
 
 SIDE = 4.0
 RADII = (1.5, 2.0, 3.0, 5.0)

@@ -24,8 +24,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, smoke_dir,  # noqa: E402
                     target_problem)
-from rffqm_nlp import viz  # noqa: E402
-from rffqm_nlp.design import DesignProblem  # noqa: E402
+from rffqm_nlp.show import pictures as viz  # noqa: E402
+from rffqm_nlp.design.problem import DesignProblem  # noqa: E402
 from rffqm_nlp.errors import RffqmError  # noqa: E402
 
 

@@ -49,7 +49,7 @@ def initial_multipliers(name: str, n: int, config: str) -> dict:
     fit of the objective gradient alone."""
     from scipy.sparse.linalg import lsqr
 
-    from rffqm_nlp import transcription
+    from rffqm_nlp.design import transcription
 
     prob, options = target_problem(name, n)
     options = replace(options, **SOLVE, ipopt_options=CONFIGS[config])

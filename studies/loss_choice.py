@@ -27,11 +27,13 @@ import casadi as ca
 import numpy as np
 
 from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem
-from rffqm_nlp import numpy_model, shape, transcription
-from rffqm_nlp.boundary import BoundaryData
-from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.targets import shape
+from rffqm_nlp.design import transcription
+from rffqm_nlp.model.boundary import BoundaryData
+from rffqm_nlp.design.problem import DesignProblem
 from rffqm_nlp.errors import RffqmError, SolverFailed
-from rffqm_nlp.results import SolveStats
+from rffqm_nlp.design.results import SolveStats
 
 LAYOUT = "zigzag_i"
 WEIGHTS = {

@@ -1,5 +1,5 @@
 """Which parametrization of a disk-topology mesh that is no graph over its plane? The
-package's conformal map onto a rectangle (rffqm_nlp.meshes, for a patch with four corners)
+package's conformal map onto a rectangle (rffqm_nlp.targets.meshes, for a patch with four corners)
 and its scipy LSCM (for one without) against libigl's LSCM (same two pinned vertices),
 libigl's harmonic map with the boundary on a circle, and Tutte's uniform-weight map (the
 package's fallback).
@@ -26,7 +26,7 @@ import numpy as np
 
 import rffqm_nlp as rq
 from common import RESULTS, Run, add_smoke, smoke_dir, write_table
-from rffqm_nlp import meshes
+from rffqm_nlp.targets import meshes
 
 CASES = [("cylinder", ((-2.0, 2.0), (-1.5, 1.5))),
          ("sphere_cap", ((-1.3, 1.3), (-1.3, 1.3))),

@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 from common import RESULTS, Run, add_smoke, smoke_dir, target_problem  # noqa: E402
 from rffqm_nlp.errors import InfeasibleDesign, SolverFailed  # noqa: E402
-from rffqm_nlp.results import SolveStats  # noqa: E402
+from rffqm_nlp.design.results import SolveStats  # noqa: E402
 
 LAYOUTS = ("zigzag_i", "zigzag_j")
 MIN_LENGTHS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)

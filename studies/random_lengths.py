@@ -37,9 +37,9 @@ import numpy as np  # noqa: E402
 import rffqm_nlp as rq  # noqa: E402
 from common import RESULTS, Run, add_smoke, smoke_dir  # noqa: E402
 from rffqm_nlp.errors import InfeasibleDesign, MarchingError  # noqa: E402
-from rffqm_nlp.lengths import length_spread, side_length_lp, side_length_nlp  # noqa: E402
-from rffqm_nlp.marching import march  # noqa: E402
-from rffqm_nlp.viz import plot_crease_pattern  # noqa: E402
+from rffqm_nlp.model.lengths import length_spread, side_length_lp, side_length_nlp  # noqa: E402
+from rffqm_nlp.model.marching import march  # noqa: E402
+from rffqm_nlp.show.pictures import plot_crease_pattern  # noqa: E402
 
 AMPLITUDE = 0.05 * np.pi
 METHODS = ("LP", "max_min", "uniform", "uniform>=t*/2")

@@ -2,7 +2,7 @@
 problem, and conjugate gradients with and without preconditioners.
 
 At the Miura start of a bundled target (marched, as the solver's first iterate) with n x n
-panels: the dense Gauss-Newton model of :mod:`rffqm_nlp.reduced` (J' J and the metric M =
+panels: the dense Gauss-Newton model of :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` (J' J and the metric M =
 D_d + S_p' D_p S_p from one pass over the levels) at the target file's first damping lam.
 Reported:
 
@@ -32,7 +32,7 @@ import numpy as np
 import scipy.linalg as la
 
 from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem, write_table
-from rffqm_nlp import reduced
+from rffqm_nlp.design.solvers import levenberg_marquardt as reduced
 
 #: CG iterations after which the model reduction is reported
 CHECKPOINTS = (20, 50)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, export_package, fmt,
                     smoke_dir, solve_in_child, target_problem, write_table)
-from rffqm_nlp import design
+from rffqm_nlp.design import problem as design
 from rffqm_nlp.errors import InputError, one_line
 
 
@@ -34,7 +34,7 @@ def run(target: str, n: int, stop_rms: float, time_limit: float,
         package: Path | None, overrides: dict) -> dict:
     """One solve in a fresh process (``package``: the exported code of an earlier
     revision, None for this one; ``overrides``: [design] keys); refused without running when
-    this revision's :func:`rffqm_nlp.design.check_memory` refuses it with the child's
+    this revision's :func:`rffqm_nlp.design.problem.check_memory` refuses it with the child's
     options (the target file's, stopping at ``stop_rms``)."""
     if package is None:
         problem, options = target_problem(target, n, **overrides)

@@ -2,7 +2,7 @@
 the default solve (Levenberg-Marquardt on the marching manifold, run to the optimality
 conditions) against ``reduced.SECANT_PAIRS``.
 
-B is NL2SOL's structured secant update (:mod:`rffqm_nlp.reduced`) applied, from zero at
+B is NL2SOL's structured secant update (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) applied, from zero at
 every iteration, to the last ``SECANT_PAIRS`` accepted steps; "all" keeps every step, which
 is the update applied once per step to the running B (the solver before 2026-12-03). The
 problems: the bundled targets (targets/*.toml, ``stop_rms`` dropped) at ``--sizes`` panels a
@@ -26,8 +26,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from common import RESULTS, TARGETS, Run, add_smoke, smoke_dir, target_problem, write_table
-from rffqm_nlp import reduced
-from rffqm_nlp.design import from_config
+from rffqm_nlp.design.solvers import levenberg_marquardt as reduced
+from rffqm_nlp.design.problem import from_config
 
 SURFACES = ("saddle", "cylinder", "paraboloid", "ellipsoid_cap", "torus_patch",
             "gaussian_bump")

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from common import (RESULTS, STOP_RMS, TARGETS, Run, add_smoke, fmt, smoke_dir,
                     solve_in_child, write_table)
-from rffqm_nlp.design import GAUSS_NEWTON_ITERATIONS, SolveOptions
+from rffqm_nlp.design.problem import GAUSS_NEWTON_ITERATIONS, SolveOptions
 
 LM = "levenberg-marquardt"  # in the Hessian column: that solver (then IPOPT, exact, if needed)
 CONFIGS = {20: (("simultaneous", "exact"), ("simultaneous", "gauss-newton"),
@@ -127,7 +127,7 @@ def main() -> None:
         f"for at most {GAUSS_NEWTON_ITERATIONS} iterations, then exact; one fresh "
         "subprocess per run", "",
         "## Transcription, solver and Hessian", "",
-        "Hessian: IPOPT's, or levenberg-marquardt for that solver (`rffqm_nlp.reduced`; "
+        "Hessian: IPOPT's, or levenberg-marquardt for that solver (`rffqm_nlp.design.solvers.levenberg_marquardt`; "
         "its sensitivities and QPs count in neither IPOPT column); "
         "iterations: all, in parentheses those with the Gauss-Newton Hessian; build: "
         "transcription and IPOPT solver construction; linear solves and NLP functions: "

@@ -7,7 +7,8 @@ from collections import Counter
 import numpy as np
 
 import rffqm_nlp as rq
-from rffqm_nlp import lengths, marching
+from rffqm_nlp.model import lengths
+from rffqm_nlp.model import marching
 
 OMEGA = 1.3
 #: Names of the patterns of :func:`make_pattern`.

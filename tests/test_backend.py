@@ -5,8 +5,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from rffqm_nlp import shape, surfaces, vertex
-from rffqm_nlp.backend import (CASADI, NUMPY, check_formula_args, finite_array, finite_result,
+from rffqm_nlp.targets import shape
+from rffqm_nlp.targets import surfaces
+from rffqm_nlp.model import vertex
+from rffqm_nlp.model.backend import (CASADI, NUMPY, check_formula_args, finite_array, finite_result,
                                is_casadi, math_for)
 from rffqm_nlp.errors import InputError, SurfaceError
 from rffqm_nlp.files import Key

@@ -19,7 +19,9 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import cli, design, files, lengths, memory, sweeps
+from rffqm_nlp import cli, files, memory, sweeps
+from rffqm_nlp.design import problem as design
+from rffqm_nlp.model import lengths
 from rffqm_nlp.cli import app
 from rffqm_nlp.errors import InputError
 

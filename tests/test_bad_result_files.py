@@ -19,7 +19,10 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import files, foldfile, numpy_model, results, sweeps
+from rffqm_nlp import files, sweeps
+from rffqm_nlp.io import foldfile
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.design import results
 from rffqm_nlp.cli import app
 from rffqm_nlp.errors import InputError
 

@@ -11,13 +11,13 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import foldfile
-from rffqm_nlp import numpy_model as nm
+from rffqm_nlp.io import foldfile
+from rffqm_nlp.model import numpy_model as nm
 from rffqm_nlp.cli import app
-from rffqm_nlp.clearance import choose_axis, panel_corners
-from rffqm_nlp.collisions import triangle_distance
-from rffqm_nlp.lengths import side_length_lp
-from rffqm_nlp.results import DesignResult, Fit
+from rffqm_nlp.design.clearance import choose_axis, panel_corners
+from rffqm_nlp.contact.collisions import triangle_distance
+from rffqm_nlp.model.lengths import side_length_lp
+from rffqm_nlp.design.results import DesignResult, Fit
 
 from helpers import fit_is_finite
 
@@ -167,7 +167,7 @@ def test_min_clearance_is_validated():
 
 
 def test_render_marks_the_panels_in_contact_red(tmp_path):
-    from rffqm_nlp import viz
+    from rffqm_nlp.show import pictures as viz
 
     ok, reason = viz.rendering_available()
     assert ok, f"off-screen rendering is unavailable: {reason}"

@@ -16,11 +16,15 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from rffqm_nlp import export, foldfile, marching, surfaces, viz
+from rffqm_nlp.io import export
+from rffqm_nlp.io import foldfile
+from rffqm_nlp.model import marching
+from rffqm_nlp.targets import surfaces
+from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
-from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.design.problem import DesignProblem
 from rffqm_nlp.errors import SolverFailed
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.design.results import DesignResult
 
 runner = CliRunner()
 

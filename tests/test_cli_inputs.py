@@ -22,11 +22,13 @@ from scipy.spatial import cKDTree
 from typer.testing import CliRunner
 from view_results import miura_result
 
-from rffqm_nlp import cli, memory, view, viz
+from rffqm_nlp import cli, memory
+from rffqm_nlp.show import view
+from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
-from rffqm_nlp.design import DesignProblem
+from rffqm_nlp.design.problem import DesignProblem
 from rffqm_nlp.errors import InputError
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.design.results import DesignResult
 
 try:
     runner = CliRunner(mix_stderr=False)

@@ -13,14 +13,14 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 
 import rffqm_nlp as rq
-from rffqm_nlp import numpy_model as nm
-from rffqm_nlp.collisions import (CollisionReport, _coarse_rows, _distance, _Geometry,
+from rffqm_nlp.model import numpy_model as nm
+from rffqm_nlp.contact.collisions import (CollisionReport, _coarse_rows, _distance, _Geometry,
                                   _lower_bound, _motion, _States, collisions, panel_distance,
                                   triangle_distance, triangles_intersect)
 from rffqm_nlp.errors import InputError
-from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.model.lengths import side_length_lp
 
-collisions_module = importlib.import_module("rffqm_nlp.collisions")
+collisions_module = importlib.import_module("rffqm_nlp.contact.collisions")
 
 
 def non_adjacent(geo: _Geometry, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -540,7 +540,7 @@ def test_degenerate_triangles_have_no_distance_here():
 
 
 def test_clearance_helpers_refuse_bad_arguments():
-    clearance = importlib.import_module("rffqm_nlp.clearance")
+    clearance = importlib.import_module("rffqm_nlp.design.clearance")
     pat = nm.march(rq.miura_boundary(2, 3))
     for call, words in (
             (lambda: clearance.closest(pat, [1.0, 2.0], 0.1), "^omega must be a single number"),

@@ -14,10 +14,11 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import design, transcription
+from rffqm_nlp.design import problem as design
+from rffqm_nlp.design import transcription
 from rffqm_nlp.cli import app
-from rffqm_nlp.design import DesignProblem, SolveOptions
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions
+from rffqm_nlp.design.results import DesignResult
 
 #: The 8 x 8 sphere cap's objective at the start x0 and at x0 + 0.01 sin(k), and the norm of
 #: its gradient there, per transcription, computed with the code before the free

@@ -1,4 +1,4 @@
-"""Curvature maps (rffqm_nlp.curvature): closed forms on a sphere cap lattice, a designed
+"""Curvature maps (rffqm_nlp.targets.curvature): closed forms on a sphere cap lattice, a designed
 sphere cap, the sign convention, and curvature.png."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 from matplotlib.image import imread
 
 import rffqm_nlp as rq
-from rffqm_nlp import viz
-from rffqm_nlp.curvature import Curvature, curvature_maps, lattice_curvatures
+from rffqm_nlp.show import pictures as viz
+from rffqm_nlp.targets.curvature import Curvature, curvature_maps, lattice_curvatures
 
 R = 4.0
 

@@ -8,10 +8,17 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import boundary, design, numpy_model, reduced, shape, surfaces, transcription
-from rffqm_nlp import vertex as vx
-from rffqm_nlp.design import DesignProblem, SolveOptions
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.model import boundary
+from rffqm_nlp.design import problem as design
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.design.solvers import levenberg_marquardt as reduced
+from rffqm_nlp.targets import shape
+from rffqm_nlp.targets import surfaces
+from rffqm_nlp.design import transcription
+from rffqm_nlp.design.transcription import gauss_newton_hessian, lagrangian_hessian
+from rffqm_nlp.model import vertex as vx
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions
+from rffqm_nlp.design.results import DesignResult
 
 TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
 
@@ -287,7 +294,7 @@ def test_nlp_derivatives_match_finite_differences(transcription):
     mult = rng.normal(size=nlp.g.numel())
     _, grad, _, jac, _, hess = (np.array(v.full()) for v in F(x0, mult))
     if nlp.parts is not None:  # IPOPT gets the Hessian assembled around the global rows
-        H = rq.transcription.lagrangian_hessian(nlp)
+        H = lagrangian_hessian(nlp)
         assert H.sparsity_out(0) == ca.triu(F.sparsity_out(5))
         upper = np.array(ca.densify(H(x0, [], 1.0, mult)).full())
         np.testing.assert_allclose(upper, np.triu(hess), rtol=0, atol=1e-12 * np.abs(hess).max())
@@ -314,7 +321,7 @@ def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
     J = np.column_stack([(res(x + h * e) - res(x - h * e)).full().ravel() / (2 * h)
                          for e in eye])
     for damping in (0.0, 0.05):
-        H = rq.transcription.gauss_newton_hessian(nlp, damping)(x, [], 0.7,
+        H = gauss_newton_hessian(nlp, damping)(x, [], 0.7,
                                                                  np.ones(nlp.g.numel()))
         expected = np.triu(0.7 * (J.T @ J + damping * np.diag(nlp.damping_weights)))
         np.testing.assert_allclose(np.array(ca.densify(H).full()), expected,
@@ -749,7 +756,8 @@ def test_rebuilding_a_callable_target_is_refused_in_one_line(callable_solved, tm
 
 
 def test_render_and_view_draw_the_kept_target(callable_solved):
-    from rffqm_nlp import cli, view
+    from rffqm_nlp import cli
+    from rffqm_nlp.show import view
 
     _, _, result, _, folder = callable_solved
     back = DesignResult.load(folder)

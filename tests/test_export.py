@@ -13,7 +13,9 @@ import trimesh
 from crease_patterns import OMEGA, PATTERNS, expected_kinds, make_pattern, n_edges
 
 import rffqm_nlp as rq
-from rffqm_nlp import export, foldfile, marching
+from rffqm_nlp.io import export
+from rffqm_nlp.io import foldfile
+from rffqm_nlp.model import marching
 from rffqm_nlp.errors import InputError
 
 

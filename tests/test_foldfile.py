@@ -11,7 +11,8 @@ import pytest
 from crease_patterns import OMEGA, PATTERNS, expected_kinds, make_pattern, n_edges
 
 import rffqm_nlp as rq
-from rffqm_nlp import foldfile, marching
+from rffqm_nlp.io import foldfile
+from rffqm_nlp.model import marching
 from rffqm_nlp.errors import InputError
 
 

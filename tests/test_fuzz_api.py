@@ -36,12 +36,20 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import rffqm_nlp as rq
-from rffqm_nlp import (backend, boundary, curvature, lengths, marching, numpy_model, pattern,
-                       shape, surfaces, vertex)
+from rffqm_nlp.model import backend
+from rffqm_nlp.model import boundary
+from rffqm_nlp.targets import curvature
+from rffqm_nlp.model import lengths
+from rffqm_nlp.model import marching
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.model import pattern
+from rffqm_nlp.targets import shape
+from rffqm_nlp.targets import surfaces
+from rffqm_nlp.model import vertex
 from rffqm_nlp.errors import RffqmError
 
-collisions = importlib.import_module("rffqm_nlp.collisions")    # rq.collisions is the function
-clearance = importlib.import_module("rffqm_nlp.clearance")
+collisions = importlib.import_module("rffqm_nlp.contact.collisions")    # rq.collisions is the function
+clearance = importlib.import_module("rffqm_nlp.design.clearance")
 
 #: The modules whose public callables are fuzzed.
 MODULES = (boundary, pattern, numpy_model, marching, vertex, lengths, shape, surfaces,

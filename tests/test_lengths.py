@@ -1,4 +1,4 @@
-"""Side lengths for fixed angles (rffqm_nlp.lengths): the LP eq:linearP and the NLP by IPOPT
+"""Side lengths for fixed angles (rffqm_nlp.model.lengths): the LP eq:linearP and the NLP by IPOPT
 over the same feasible set, on the paper's Fig. Random inputs."""
 
 import numpy as np
@@ -6,10 +6,10 @@ import pytest
 from scipy.optimize import linprog
 
 import rffqm_nlp as rq
-from rffqm_nlp import lengths
+from rffqm_nlp.model import lengths
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
-from rffqm_nlp.lengths import length_maps, length_spread, side_length_lp, side_length_nlp
-from rffqm_nlp.marching import march, pattern_function
+from rffqm_nlp.model.lengths import length_maps, length_spread, side_length_lp, side_length_nlp
+from rffqm_nlp.model.marching import march, pattern_function
 
 SEEDS = (0, 1, 2)
 OBJECTIVES = ("max_min", "uniform")
@@ -23,7 +23,7 @@ def fig_random(seed, n=10):
 def sides_matrix_by_marching(bd):
     """Column k: all sides (lh then lv) marched from ell = e_k with the unchecked CasADi graph.
 
-    Independent of rffqm_nlp.lengths.length_maps' coefficient recursion.
+    Independent of rffqm_nlp.model.lengths.length_maps' coefficient recursion.
     """
     N, M = bd.N, bd.M
     f = pattern_function(N, M)

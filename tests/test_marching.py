@@ -6,10 +6,10 @@ import pytest
 from hypothesis import assume, given, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import marching as mg
-from rffqm_nlp import numpy_model
-from rffqm_nlp import vertex as vx
-from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.model import marching as mg
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.model import vertex as vx
+from rffqm_nlp.model.lengths import side_length_lp
 
 from forward_oracle import rot_about, unit
 from helpers import admissible_vertex, panel_distances, panel_rotations

@@ -1,4 +1,4 @@
-"""rffqm_nlp.meshes: a Mesh does not depend on the units of its shape. Every step works in
+"""rffqm_nlp.targets.meshes: a Mesh does not depend on the units of its shape. Every step works in
 the shape's unit frame (centred, scaled by a power of two near its bounding box's
 diagonal), so the same mesh or point cloud in micrometres, metres or at 1e12 gives the same
 target up to that scale. Before, trimesh's absolute tolerances refused a mesh below about
@@ -11,8 +11,8 @@ import pytest
 import trimesh
 
 import rffqm_nlp as rq
-from rffqm_nlp.meshes import Mesh
-from rffqm_nlp.shape import relative_fit
+from rffqm_nlp.targets.meshes import Mesh
+from rffqm_nlp.targets.shape import relative_fit
 
 SCALES = [1e-6, 1e-3, 1e12]
 

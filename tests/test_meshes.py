@@ -1,4 +1,4 @@
-"""rffqm_nlp.meshes: meshes and point clouds as target surfaces (Mesh), their topology
+"""rffqm_nlp.targets.meshes: meshes and point clouds as target surfaces (Mesh), their topology
 checks, parametrization, spline fit and distances to the shape."""
 
 import json
@@ -14,10 +14,10 @@ import trimesh
 from scipy.spatial import Delaunay
 
 import rffqm_nlp as rq
-from rffqm_nlp import meshes
+from rffqm_nlp.targets import meshes
 from rffqm_nlp.errors import SurfaceError
-from rffqm_nlp.meshes import MAX_DEVIATION, Mesh
-from rffqm_nlp.shape import distances_to, relative_fit
+from rffqm_nlp.targets.meshes import MAX_DEVIATION, Mesh
+from rffqm_nlp.targets.shape import distances_to, relative_fit
 
 
 def _lattice_error(mesh: Mesh, surface) -> float:

@@ -1,5 +1,5 @@
-"""The CasADi marching graph (rffqm_nlp.marching) and the independent NumPy model
-(rffqm_nlp.numpy_model) compute the same patterns, folded states and fold angles, and reject
+"""The CasADi marching graph (rffqm_nlp.model.marching) and the independent NumPy model
+(rffqm_nlp.model.numpy_model) compute the same patterns, folded states and fold angles, and reject
 the same boundary data with the same check at the same panel."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 import rffqm_nlp as rq
-from rffqm_nlp import marching as mg
-from rffqm_nlp import numpy_model as nm
-from rffqm_nlp import vertex as vx
+from rffqm_nlp.model import marching as mg
+from rffqm_nlp.model import numpy_model as nm
+from rffqm_nlp.model import vertex as vx
 from rffqm_nlp.errors import InfeasibleDesign
-from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.model.lengths import side_length_lp
 
 from helpers import admissible_vertex
 

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from rffqm_nlp import BoundaryData, MarchingError, miura_boundary, perturb_angles
 from rffqm_nlp.errors import InputError
-from rffqm_nlp import numpy_model as nm
-from rffqm_nlp.numpy_model import fold, fold_angles, gamma1_bar, gamma2_bar, march, mu1, mu2
+from rffqm_nlp.model import numpy_model as nm
+from rffqm_nlp.model.numpy_model import fold, fold_angles, gamma1_bar, gamma2_bar, march, mu1, mu2
 
 from forward_oracle import fold_loop, march_loop
 

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import rffqm_nlp as rq
-from rffqm_nlp import marching, numpy_model
-from rffqm_nlp.pattern import check_omega, motion_omegas
+from rffqm_nlp.model import marching
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.model.pattern import check_omega, motion_omegas
 
 
 def test_check_omega_keeps_scalars_and_1d_arrays():
@@ -102,7 +103,7 @@ def test_pattern_keeps_what_marching_makes_and_copies_it_read_only():
 
 
 def test_single_fold_angles_patterns_and_memory_are_checked(monkeypatch):
-    from rffqm_nlp import pattern
+    from rffqm_nlp.model import pattern
 
     assert pattern.check_fold_angle(np.float64(0.5)) == 0.5
     with pytest.raises(rq.InputError, match=r"^omega_max must be a single number in \[-pi, "

@@ -1,4 +1,4 @@
-"""Levenberg-Marquardt on the marching manifold (rffqm_nlp.reduced)."""
+"""Levenberg-Marquardt on the marching manifold (rffqm_nlp.design.solvers.levenberg_marquardt)."""
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -13,8 +13,9 @@ from hypothesis import given, settings, strategies as st
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import rffqm_nlp as rq
-from rffqm_nlp import numpy_model, reduced
-from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.design.solvers import levenberg_marquardt as reduced
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions
 
 LM = "levenberg-marquardt"
 

@@ -9,9 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import results
+from rffqm_nlp.design import results
 from rffqm_nlp.cli import app
-from rffqm_nlp.results import DesignResult, Fit, SolveStats
+from rffqm_nlp.design.results import DesignResult, Fit, SolveStats
 
 from helpers import fit_is_finite
 

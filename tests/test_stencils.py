@@ -1,4 +1,4 @@
-"""Jacobians assembled from local stencils (rffqm_nlp.stencils) against CasADi's Jacobian
+"""Jacobians assembled from local stencils (rffqm_nlp.design.stencils) against CasADi's Jacobian
 of the whole expression."""
 
 from dataclasses import replace
@@ -10,8 +10,10 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
-from rffqm_nlp import clearance, numpy_model, stencils
-from rffqm_nlp.lengths import side_length_lp
+from rffqm_nlp.design import clearance
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.design import stencils
+from rffqm_nlp.model.lengths import side_length_lp
 
 
 def assembled(jac: stencils.LocalJacobian, x: np.ndarray):
@@ -173,7 +175,7 @@ def test_the_jacobian_is_casadis_with_valley_vertex_signs(seed):
 
 
 def test_clearance_rows_appended_to_the_nlp_join_its_stencils():
-    """NLP.with_rows (here the clearance rows of rffqm_nlp.clearance) extends the stencil
+    """NLP.with_rows (here the clearance rows of rffqm_nlp.design.clearance) extends the stencil
     Jacobian by the new rows."""
     prob = problem("sphere_cap", 6)
     nlp = prob.transcribe()

@@ -21,11 +21,12 @@ import pytest
 from hypothesis import given, strategies as st
 from typer.testing import CliRunner
 
-from rffqm_nlp import surfaces, sweeps
+from rffqm_nlp import sweeps
+from rffqm_nlp.targets import surfaces
 from rffqm_nlp.cli import app
-from rffqm_nlp.design import DesignProblem, SolveOptions, multistart_starts
+from rffqm_nlp.design.problem import DesignProblem, SolveOptions, multistart_starts
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
-from rffqm_nlp.results import DesignResult
+from rffqm_nlp.design.results import DesignResult
 
 STUDY = """
 description = "four tiny sphere caps"

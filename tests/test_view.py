@@ -1,4 +1,4 @@
-"""The interactive view (rffqm_nlp.view) without a browser: traces, slider, page."""
+"""The interactive view (rffqm_nlp.show.view) without a browser: traces, slider, page."""
 
 from __future__ import annotations
 
@@ -14,10 +14,12 @@ from plotly.offline import get_plotlyjs
 from scipy.spatial import cKDTree
 from view_results import miura_result
 
-from rffqm_nlp import numpy_model, results, view
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.design import results
+from rffqm_nlp.show import view
 from rffqm_nlp.errors import InputError
-from rffqm_nlp.export import COLORS
-from rffqm_nlp.foldfile import edge_assignments, edges_vertices
+from rffqm_nlp.io.export import COLORS
+from rffqm_nlp.io.foldfile import edge_assignments, edges_vertices
 
 
 @pytest.fixture(scope="module")

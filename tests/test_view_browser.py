@@ -11,7 +11,7 @@ import os
 import pytest
 from view_results import miura_result
 
-from rffqm_nlp import view
+from rffqm_nlp.show import view
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

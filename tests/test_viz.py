@@ -12,8 +12,9 @@ import pytest
 import trimesh
 
 import rffqm_nlp as rq
-from rffqm_nlp import marching, viz
-from rffqm_nlp import export
+from rffqm_nlp.model import marching
+from rffqm_nlp.show import pictures as viz
+from rffqm_nlp.io import export
 from rffqm_nlp.errors import InputError
 
 matplotlib.use("Agg")

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rffqm_nlp import numpy_model
-from rffqm_nlp.boundary import miura_boundary
-from rffqm_nlp.results import DesignResult, Fit, SolveStats
+from rffqm_nlp.model import numpy_model
+from rffqm_nlp.model.boundary import miura_boundary
+from rffqm_nlp.design.results import DesignResult, Fit, SolveStats
 
 
 def _rotation(angle: float) -> np.ndarray:

@@ -21,8 +21,8 @@ import numpy as np
 from . import vertex as vx
 from .backend import Scalar, finite_array, finite_result, is_casadi
 from .boundary import BoundaryData, check_boundary, check_size
-from .errors import InputError, MarchingError
-from .files import Key, check_value, describe_value
+from ..errors import InputError, MarchingError
+from ..files import Key, check_value, describe_value
 from .pattern import (Pattern, check_fold_angle, check_fold_memory, check_folded,
                       check_march_memory, check_omega, check_pattern)
 
@@ -559,7 +559,7 @@ def fold(pat: Pattern, omega: float | np.ndarray) -> np.ndarray:
     """Folded vertex positions: (N+1, M+1, 3) for scalar omega, (K, N+1, M+1, 3) for K values.
 
     Raises :class:`InputError` when ``pat`` is not a :class:`Pattern`, for an invalid
-    omega (:func:`~rffqm_nlp.pattern.check_omega`), when the states need more memory than
+    omega (:func:`~rffqm_nlp.model.pattern.check_omega`), when the states need more memory than
     this machine has left, and when the pattern has no finite folded state (a vertex
     outside MV(alpha, beta): a pattern that was not marched).
     """

@@ -11,11 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from . import memory
+from .. import memory
 from .backend import finite_array, finite_result
 from .boundary import BoundaryData
-from .errors import InputError
-from .files import Key, check_value, describe_value
+from ..errors import InputError
+from ..files import Key, check_value, describe_value
 
 #: Most states of a folding motion (:func:`check_frames`).
 MAX_FRAMES = 100_000

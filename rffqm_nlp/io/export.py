@@ -1,7 +1,7 @@
 """Files other tools open: SVG/PDF/DXF crease patterns, OBJ/PLY/GLB folded meshes, and the
 one registry :data:`EXPORTERS` (with FOLD) that ``rffqm export`` and ``rffqm design`` use.
 
-Edges, faces and vertices are numbered as in the FOLD file (:mod:`rffqm_nlp.foldfile`).
+Edges, faces and vertices are numbered as in the FOLD file (:mod:`rffqm_nlp.io.foldfile`).
 Every file is written atomically (:func:`rffqm_nlp.files.atomic_path`), and only from finite
 coordinates that the file's number type holds (64-bit floats; 32-bit floats in PLY and
 GLB): anything else is refused in one :class:`InputError` line and nothing is written.
@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InputError
-from .files import atomic_path
+from ..errors import InputError
+from ..files import atomic_path
 from .foldfile import (CREATOR, FLOAT32_MAX, FLOAT64_MAX, check_coordinates, finite_pattern,
                        edge_assignments, edges_vertices, faces_vertices, write_fold)
-from .marching import fold
-from .pattern import Pattern, check_fold_angle
+from ..model.marching import fold
+from ..model.pattern import Pattern, check_fold_angle
 
 if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
     import trimesh

@@ -10,7 +10,7 @@ functions for its arguments, CasADi's as soon as one argument is a CasADi object
 
 Both namespaces have the same names: ``sin, cos, tan, atan, atan2, sqrt, exp, log, sinh,
 cosh, tanh, fabs, where, pi``; ``where(cond, a, b)`` is ``numpy.where`` or ``casadi.if_else``.
-Users reach :func:`math_for` as ``rffqm_nlp.surfaces.mathlib``.
+Users reach :func:`math_for` as ``rffqm_nlp.targets.surfaces.mathlib``.
 
 The checks of a public function's numeric arguments live here too: :func:`finite_array`
 (an array of finite real numbers of a given shape), :func:`check_formula_args` (the
@@ -28,8 +28,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .errors import InputError
-from .files import describe_value
+from ..errors import InputError
+from ..files import describe_value
 
 #: A value the formulas written once for both take and return: a Python or NumPy number, a
 #: NumPy array, or a CasADi SX/MX symbol or DM matrix.

@@ -2,10 +2,10 @@
 by side with its target's (docs/paper.md s.8).
 
 At every interior point of an (n, m) lattice the discrete first and second fundamental
-forms are those of the loss (:func:`rffqm_nlp.shape.fundamental_forms`: central
+forms are those of the loss (:func:`rffqm_nlp.targets.shape.fundamental_forms`: central
 differences, unit spacings); from them K = det(II) / det(I) = (L N - M^2) / (E G - F^2) and
 H = tr(I^-1 II) / 2 = (E N - 2 F M + G L) / (2 (E G - F^2)), the formulas of
-:mod:`rffqm_nlp.surfaces` (neither depends on the spacings). H takes the sign of the target's
+:mod:`rffqm_nlp.targets.surfaces` (neither depends on the spacings). H takes the sign of the target's
 normal: the design's discrete normal r_u x r_v is turned, point by point, to agree with the
 target lattice's, which is the target surface's r_u x r_v up to the differences.
 """
@@ -17,8 +17,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import shape
-from .backend import finite_array, finite_result
-from .errors import InputError
+from ..model.backend import finite_array, finite_result
+from ..errors import InputError
 from .surfaces import Surface, check_surface
 
 
@@ -47,7 +47,7 @@ class Curvature:
 
 def _normals(P: np.ndarray) -> np.ndarray:
     """Discrete unit normals r_u x r_v / |r_u x r_v| at the interior points of P (n, m, 3)
-    with the central differences of :func:`rffqm_nlp.shape.fundamental_forms`, (n-2, m-2, 3)."""
+    with the central differences of :func:`rffqm_nlp.targets.shape.fundamental_forms`, (n-2, m-2, 3)."""
     r_u = P[2:, 1:-1] - P[:-2, 1:-1]
     r_v = P[1:-1, 2:] - P[1:-1, :-2]
     cross = np.cross(r_u, r_v)
@@ -82,7 +82,7 @@ def lattice_curvatures(P: np.ndarray, orient: np.ndarray | None = None
 def curvature_maps(coarse: np.ndarray, target_points: np.ndarray,
                    target: Surface) -> Curvature:
     """The :class:`Curvature` of an aligned coarse lattice (N+1, M+1, 3) against the target
-    lattice (N+1, M+1, 3), which is ``target``'s :meth:`~rffqm_nlp.surfaces.Surface.lattice`
+    lattice (N+1, M+1, 3), which is ``target``'s :meth:`~rffqm_nlp.targets.surfaces.Surface.lattice`
     (uniform in parameters over the whole domain). Raises :class:`InputError` for
     arguments of other kinds or shapes and for degenerate lattices (no finite curvature)."""
     check_surface(target, "target")

@@ -12,7 +12,7 @@ The lattice is the paper's integer lattice r(i, j) with parameter spacings hu (a
 hv (along j), both 1 by default.
 
 Numeric arguments are checked (finite real numbers of the shapes said; a target a
-:class:`~rffqm_nlp.surfaces.Surface` or points), and so are numeric results: a lattice with
+:class:`~rffqm_nlp.targets.surfaces.Surface` or points), and so are numeric results: a lattice with
 no finite result (a degenerate one, or coordinates so large that their products overflow)
 raises :class:`~rffqm_nlp.errors.InputError` instead of giving NaN or infinity.
 """
@@ -26,9 +26,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import directed_hausdorff
 
-from .backend import finite_array, finite_result, is_casadi, math_for
-from .errors import InputError
-from .files import Key, check_value, describe_value
+from ..model.backend import finite_array, finite_result, is_casadi, math_for
+from ..errors import InputError
+from ..files import Key, check_value, describe_value
 from .surfaces import Surface, check_surface, point_set_diameter
 
 Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
@@ -197,7 +197,7 @@ def align(P: Any, Q: Any, reflection: bool = False) -> np.ndarray:
 def distances_to(points: Any, target: Surface | Any) -> np.ndarray:
     """Distance from each of ``points`` ((..., 3), or a component triple) to the target,
     shape (...): to its closest point on a Surface (:meth:`Surface.closest_points`; on a
-    :class:`~rffqm_nlp.meshes.Mesh` made from a mesh, on its triangles), or to the nearest
+    :class:`~rffqm_nlp.targets.meshes.Mesh` made from a mesh, on its triangles), or to the nearest
     of a point set ((k, 3) or (n, m, 3); scipy's cKDTree)."""
     pts, shape = _points(points, "points")
     if isinstance(target, Surface):
@@ -274,7 +274,7 @@ def lattice_area(P: Any) -> float:
 def surface_area(target: Surface) -> float:
     """Area of r(u, v) over the target's domain: the integral of |r_u x r_v| by a composite
     Gauss-Legendre rule (:data:`AREA_CELLS` cells of :data:`AREA_ORDER` nodes per direction)
-    with the surface's exact derivatives. For a :class:`~rffqm_nlp.meshes.Mesh` this is the
+    with the surface's exact derivatives. For a :class:`~rffqm_nlp.targets.meshes.Mesh` this is the
     area of its fitted spline over the domain."""
     check_surface(target, "target")
     nodes, weights = np.polynomial.legendre.leggauss(AREA_ORDER)
@@ -297,7 +297,7 @@ def surface_area(target: Surface) -> float:
 
 def shape_fit(folded: np.ndarray, target: Surface) -> dict[str, float]:
     """Fits of an aligned folded state (2N+1, 2M+1, 3) against the target's shape (closest
-    points on the surface, or on the mesh for a :class:`~rffqm_nlp.meshes.Mesh`), over the
+    points on the surface, or on the mesh for a :class:`~rffqm_nlp.targets.meshes.Mesh`), over the
     diameter: ``rms_surface``, ``hausdorff`` of the coarse lattice ``folded[::2, ::2]``,
     ``rms_surface_vertices``, ``hausdorff_vertices`` of every vertex, and ``coverage``: the
     coarse lattice's :func:`lattice_area` over the target's :func:`surface_area`."""

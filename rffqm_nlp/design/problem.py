@@ -5,9 +5,9 @@ coarse lattice r(i, j) = y^{(2i)(2j)} should match the target lattice, the Miura
 mountain-valley assignment held fixed, the inline manufacturability constraints and the loss.
 :class:`SolveOptions` states how: the solver, the transcription, IPOPT's Hessian and the
 limits. :meth:`DesignProblem.solve` transcribes the problem
-(:mod:`rffqm_nlp.transcription`), runs Levenberg-Marquardt on the marching manifold
-(:mod:`rffqm_nlp.reduced`) and/or IPOPT, re-marches the answer with the independent NumPy
-model and returns a :class:`~rffqm_nlp.results.DesignResult`. A design file has the tables
+(:mod:`rffqm_nlp.design.transcription`), runs Levenberg-Marquardt on the marching manifold
+(:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) and/or IPOPT, re-marches the answer with the independent NumPy
+model and returns a :class:`~rffqm_nlp.design.results.DesignResult`. A design file has the tables
 [target], [design] and [solve] (:func:`load_design`). Measurements of the solvers and
 options: docs/solvers.md.
 """
@@ -23,15 +23,21 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-from . import clearance, memory, numpy_model, reduced, shape, surfaces, transcription
-from .boundary import LAYOUTS, BoundaryData, miura_boundary, refine
-from .collisions import collisions
-from .curvature import curvature_maps
-from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
+from . import clearance
+from .. import memory
+from ..model import numpy_model
+from .solvers import levenberg_marquardt as reduced
+from ..targets import shape
+from ..targets import surfaces
+from . import transcription
+from ..model.boundary import LAYOUTS, BoundaryData, miura_boundary, refine
+from ..contact.collisions import collisions
+from ..targets.curvature import curvature_maps
+from ..errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
                      SolverFailed, one_line, raise_for_ipopt)
-from .files import Key, check_table, check_value, describe_value, read_toml, unknown_key
-from .ipopt_options import INT_MAX, NO_OPTION_FILE, check_ipopt_options
-from .pattern import Pattern
+from ..files import Key, check_table, check_value, describe_value, read_toml, unknown_key
+from ..ipopt_options import INT_MAX, NO_OPTION_FILE, check_ipopt_options
+from ..model.pattern import Pattern
 from .results import DesignResult, Fit, SolveStats
 
 PI = np.pi
@@ -134,7 +140,7 @@ class SolveOptions:
     """How a :class:`DesignProblem` is solved (the [solve] table of a design file).
 
     * ``solver``: "levenberg-marquardt" (the default) or "ipopt". Levenberg-Marquardt runs
-      on the marching manifold (:mod:`rffqm_nlp.reduced`, simultaneous transcription only):
+      on the marching manifold (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`, simultaneous transcription only):
       its variables are the boundary data, omega and the alignment, every iterate is
       re-marched, so every iterate is an admissible design (after restoration steps from a
       start that breaks a constraint), and the inequalities enter each step linearised (a
@@ -147,7 +153,7 @@ class SolveOptions:
       graph as a function of the boundary data; IPOPT only). Both state the same NLP;
     * ``hessian``: IPOPT's Hessian, "exact", "gauss-newton" or "limited-memory" (L-BFGS).
       "gauss-newton" is J^T J of the residuals plus ``damping`` times a diagonal
-      Levenberg-Marquardt term (:func:`rffqm_nlp.transcription.gauss_newton_hessian`), for
+      Levenberg-Marquardt term (:func:`rffqm_nlp.design.transcription.gauss_newton_hessian`), for
       at most :data:`GAUSS_NEWTON_ITERATIONS` iterations, after which the exact Hessian
       takes over from the last iterate and its multipliers unless ``stop_rms`` was reached
       or IPOPT stopped with a status of :data:`HANDOVER_STOP_STATUSES`
@@ -178,7 +184,7 @@ class SolveOptions:
       (:func:`solve_multistart`); ``seed``: the seed of their perturbations;
     * ``boundary_knots``: Levenberg-Marquardt steps first in a coarse basis of the boundary
       data, each of its 12 classes (A, B at either edge, LV, LH; each parity) piecewise
-      linear between at most this many knots (:func:`rffqm_nlp.reduced.boundary_basis`),
+      linear between at most this many knots (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`),
       then, unless ``stop_rms`` was reached there, in the whole design from its end; 0: the
       whole design from the start. Patterns up to about 2 x ``boundary_knots`` panels a side
       have no coarser basis.
@@ -273,24 +279,24 @@ class DesignProblem:
     * ``mu_margin``: |mu_abc| of every panel stays on its starting side of 1 by this margin
       (second check, eq:secondCheck, so sigma_d never flips), and the multiplier of every
       boundary vertex that vanishes where its sigma leaves MV(alpha, beta) keeps its sign,
-      at least this large (:func:`rffqm_nlp.vertex.mv_multiplier`): the MV pattern of the
+      at least this large (:func:`rffqm_nlp.model.vertex.mv_multiplier`): the MV pattern of the
       Miura is held at every crease;
     * ``min_length``: every side >= min_length times the mean side (replaces the LP);
     * ``min_clearance``: a sheet thickness, in the target's length units: panels that share
       no vertex stay at least this far apart in the designed state (0: not asked; see
-      :mod:`rffqm_nlp.clearance`). Whether the motion up to the designed state is free of
+      :mod:`rffqm_nlp.design.clearance`). Whether the motion up to the designed state is free of
       self-contact is reported in ``result.fit.collision_free`` either way;
     * ``omega_bounds``: bounds of the fold parameter;
     * ``fix``: groups held at their start, among "angles", "lengths", "omega";
     * ``weights``: loss weights, "forms" (the paper's fundamental-form loss) and "position"
       (lattice positions after a rigid alignment that is part of the NLP), see
-      :func:`rffqm_nlp.transcription.loss_residuals`; "regularization" (Tikhonov, towards
+      :func:`rffqm_nlp.design.transcription.loss_residuals`; "regularization" (Tikhonov, towards
       the Miura start) and "smoothness" (second differences of the boundary perturbation
-      along each edge, :func:`rffqm_nlp.transcription.smoothness_residuals`; default 0);
+      along each edge, :func:`rffqm_nlp.design.transcription.smoothness_residuals`; default 0);
       missing keys count as 0;
     * ``correspondence``: "free" (the default: the lattice's (u, v) are a smooth map of
       the lattice indices whose few controls are design variables, kept in the domain and
-      from folding over, :class:`rffqm_nlp.transcription.Correspondence`) or "lattice"
+      from folding over, :class:`rffqm_nlp.design.transcription.Correspondence`) or "lattice"
       (the target lattice is r on the uniform grid of the domain); "free" fits the shape
       closer for a few more iterations, measured in docs/meshes.md.
 
@@ -390,7 +396,7 @@ class DesignProblem:
     def carried(self, initial: DesignResult, start: Start | None = None) -> Start:
         """``initial``, a result of this problem at these panels or fewer, as a start of
         this problem: as it is at the same panels; from fewer, its boundary data carried to
-        these panels (:func:`rffqm_nlp.boundary.refine`, coarse-to-fine) with its omega, and
+        these panels (:func:`rffqm_nlp.model.boundary.refine`, coarse-to-fine) with its omega, and
         aligned to the target lattice anew. ``start``: this problem's (default
         :meth:`start`). Raises :class:`InputError` when ``initial`` has more panels, another
         layout, alpha0 or omega0, or when its carried pattern does not march."""
@@ -425,7 +431,7 @@ class DesignProblem:
     def _initial_controls(self, initial: DesignResult,
                           corr: transcription.Correspondence | None) -> np.ndarray | None:
         """The controls of ``initial``'s free correspondence (read from its design vector,
-        :func:`rffqm_nlp.transcription.controls_of`) when this problem has one of the same
+        :func:`rffqm_nlp.design.transcription.controls_of`) when this problem has one of the same
         size and they lie within its bounds (the domain, the edges pinned); else None (the
         map starts uniform)."""
         design, solve = (initial.problem.get(k, {}) for k in ("design", "solve"))
@@ -471,7 +477,7 @@ class DesignProblem:
         pattern; a free correspondence's map is kept, see :meth:`transcribe`); where it
         breaks a constraint, solver "levenberg-marquardt" starts from its free boundary
         data moved part or all of the way toward the Miura's (``stats.start_moved``,
-        :func:`rffqm_nlp.reduced.admissible_toward`), or where no such point holds every
+        :func:`rffqm_nlp.design.solvers.levenberg_marquardt.admissible_toward`), or where no such point holds every
         constraint restores the warm start itself (``stats.restoration_iterations``), and
         IPOPT starts from it where that fails too.
         ``verbose``: IPOPT prints its iterations.
@@ -517,7 +523,7 @@ class DesignProblem:
                         record: "_Record", outcome: "_Outcome"
                         ) -> tuple[transcription.NLP, "_Outcome"]:
         """Re-solve, warm-started, with clearance rows on the pairs of panels closer than
-        about min_clearance (:mod:`rffqm_nlp.clearance`), refreshed each round, until the
+        about min_clearance (:mod:`rffqm_nlp.design.clearance`), refreshed each round, until the
         re-marched design keeps min_clearance. Raises SolverFailed (status
         "clearance_not_met") when a round fails or brings the closest pair no farther."""
         pairs = np.zeros((0, 2), dtype=np.int64)
@@ -568,7 +574,7 @@ class DesignProblem:
         """One continuation stage from x: Levenberg-Marquardt (with that solver), then
         IPOPT when it stalls or reaches no admissible point (from a start that breaks a
         constraint: moved toward ``reference()`` where given,
-        :func:`rffqm_nlp.reduced.admissible_toward`, else restored)."""
+        :func:`rffqm_nlp.design.solvers.levenberg_marquardt.admissible_toward`, else restored)."""
         if options.solver == LM:
             marched = self._solve_levenberg_marquardt(nlp, start, options, record, x, reference)
             if marched is not None and marched.status != "Stalled":
@@ -582,7 +588,7 @@ class DesignProblem:
                                    options: SolveOptions, record: "_Record", x: np.ndarray,
                                    reference: Callable[[], np.ndarray] | None = None
                                    ) -> "_Outcome | None":
-        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.reduced`) from x
+        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) from x
         (or, where x breaks a constraint, x moved toward ``reference()``, or restored), every
         step recorded; None when it reached no admissible point (its restoration steps, if
         any, counted), unless the iterations or the time ran out in the restoration
@@ -788,7 +794,7 @@ class DesignProblem:
     def to_config(self) -> dict[str, Any]:
         """The problem as TOML-ready tables: {"target": ..., "design": ...}. A target that no
         table can name (a lambda, a closure, a Mesh made from arrays) is recorded as not
-        rebuildable (:func:`rffqm_nlp.surfaces.config_of`)."""
+        rebuildable (:func:`rffqm_nlp.targets.surfaces.config_of`)."""
         design = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "target"}
         design.update(weights=dict(self.weights), panels=list(self.panels),
                       omega_bounds=list(self.omega_bounds), fix=list(self.fix))
@@ -807,7 +813,7 @@ def from_config(config: dict[str, Any], root: str | Path | None = None,
 
     ``root``: the folder that a target's ``python = "file.py:function"`` is relative to
     (default: the current folder); ``trust``: run the code a target names
-    (:func:`rffqm_nlp.surfaces.from_config`), refused without it.
+    (:func:`rffqm_nlp.targets.surfaces.from_config`), refused without it.
     """
     tables = check_table(config, FILE_KEYS, "")
     if "target" not in tables:
@@ -830,11 +836,11 @@ def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, S
     A target's ``python = "file.py:function"`` is relative to the file's folder; the code a
     target names runs only with ``trust=True`` (for files you trust).
 
-    A file whose suffix names a format trimesh reads (:func:`rffqm_nlp.meshes.is_mesh_file`:
+    A file whose suffix names a format trimesh reads (:func:`rffqm_nlp.targets.meshes.is_mesh_file`:
     OBJ, STL, PLY, OFF, GLB, XYZ, ...) is a mesh or point cloud: its
-    :class:`~rffqm_nlp.meshes.Mesh` (by its resolved path) with the default design and
+    :class:`~rffqm_nlp.targets.meshes.Mesh` (by its resolved path) with the default design and
     solve options."""
-    from .meshes import is_mesh_file  # here: meshes imports surfaces, which imports Mesh
+    from ..targets.meshes import is_mesh_file  # here: meshes imports surfaces, which imports Mesh
 
     if is_mesh_file(path):
         # abspath, not resolve: a path this system cannot open (a NUL) is Mesh's to refuse
@@ -857,7 +863,7 @@ MEMORY_SEQUENTIAL_BUILD = 700e6
 MEMORY_FREE_PER_PANEL = 1e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs,
-#: :class:`rffqm_nlp.reduced._Window`, as measured in docs/solvers.md, and the identity
+#: :class:`rffqm_nlp.design.solvers.levenberg_marquardt._Window`, as measured in docs/solvers.md, and the identity
 #: over the 3 (P + Q) design variables) by those design variables, 8 bytes each ...
 WORKING_SET = 22
 #: ... and its dense design x design matrices held at once (J'J, the metric, the secant
@@ -875,7 +881,7 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     design variables, or with ``stop_rms`` and ``boundary_knots`` k the coarse basis'
     6 (min(k, P / 2) + min(k, Q / 2)) coordinates (a run that does not reach stop_rms in
     the coarse basis goes on in the whole design: then n_d's memory), and with a free
-    correspondence (:class:`rffqm_nlp.transcription.Correspondence`)
+    correspondence (:class:`rffqm_nlp.design.transcription.Correspondence`)
     MEMORY_FREE_PER_PANEL * P Q more and its 2 Ku Kv controls (at most 2 GRID_CONTROLS^2)
     in n_d; IPOPT needs
     memory.BASE + MEMORY_PER_PANEL[transcription] * P Q (plus MEMORY_SEQUENTIAL_BUILD for
@@ -915,7 +921,7 @@ def check_memory(problem: DesignProblem, options: SolveOptions | None = None) ->
 
 def collision_fields(pattern: Pattern, omega: float) -> dict[str, Any]:
     """Fit's ``collision_free`` and ``first_contact_omega`` of ``pattern`` folding from 0 to
-    ``omega`` (:func:`rffqm_nlp.collisions.collisions`)."""
+    ``omega`` (:func:`rffqm_nlp.contact.collisions.collisions`)."""
     report = collisions(pattern, omega)
     return {"collision_free": report.free, "first_contact_omega": report.first_omega}
 
@@ -935,8 +941,8 @@ def _marched(nlp: transcription.NLP, start: Start, x: np.ndarray, rows: int,
 def design_fit(folded: np.ndarray, target_points: np.ndarray,
                target: surfaces.Surface) -> dict[str, float]:
     """Fit measures of an aligned folded state (2N+1, 2M+1, 3) against the target lattice
-    (N+1, M+1, 3) and the target's shape (:func:`rffqm_nlp.shape.shape_fit`), relative to
-    the target's diameter, as :class:`~rffqm_nlp.results.Fit` defines them (all but the
+    (N+1, M+1, 3) and the target's shape (:func:`rffqm_nlp.targets.shape.shape_fit`), relative to
+    the target's diameter, as :class:`~rffqm_nlp.design.results.Fit` defines them (all but the
     pattern's side and angle measures)."""
     diameter = target.diameter()
     coarse = shape.coarse_grain(folded)

@@ -21,8 +21,8 @@ from typing import Any, Literal
 import numpy as np
 
 from .backend import finite_array
-from .errors import BoundaryDataError, InputError
-from .files import Key, check_value, describe_value
+from ..errors import BoundaryDataError, InputError
+from ..files import Key, check_value, describe_value
 
 Layout = Literal["zigzag_j", "zigzag_i"]
 LAYOUTS: tuple[str, ...] = ("zigzag_j", "zigzag_i")

@@ -1,11 +1,11 @@
 """Clearance at the designed state: ``DesignProblem(min_clearance=c)`` (a sheet thickness).
 
 Panels that share no vertex must stay at least c apart in the designed folded state.
-:func:`rffqm_nlp.design.DesignProblem.solve` meets this by inline constraints on the pairs
+:func:`rffqm_nlp.design.problem.DesignProblem.solve` meets this by inline constraints on the pairs
 that come close, refreshed as the design moves (docs/collisions.md):
 
 * Near pairs: the collision broad phase and exact panel distances
-  (:func:`rffqm_nlp.collisions.near_pairs`) at the re-marched designed state; every pair
+  (:func:`rffqm_nlp.contact.collisions.near_pairs`) at the re-marched designed state; every pair
   closer than c (1 + :data:`MARGIN`) is constrained, and stays so in later rounds.
 * Rows: for each constrained pair a separating axis u (unit, a smooth function of the
   folded vertices: a panel's normal, the normalised cross product of an edge of each
@@ -16,7 +16,7 @@ that come close, refreshed as the design moves (docs/collisions.md):
   gap is a lower bound of the Euclidean distance of two convex panels, so rows that hold
   keep the pair at least c apart (conservative when the closest features are two
   corners or a corner and an edge).
-* The rows are appended to the NLP's constraints (:meth:`rffqm_nlp.transcription.NLP.with_rows`),
+* The rows are appended to the NLP's constraints (:meth:`rffqm_nlp.design.transcription.NLP.with_rows`),
   written in the NLP's folded vertices (variables of the simultaneous transcription).
 """
 
@@ -28,14 +28,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from . import memory
-from .backend import finite_array
-from .boundary import check_size
-from .collisions import near_pairs
-from .errors import InputError
-from .files import Key, check_value, describe_value
-from .numpy_model import fold
-from .pattern import Pattern, check_fold_angle, check_pattern
+from .. import memory
+from ..model.backend import finite_array
+from ..model.boundary import check_size
+from ..contact.collisions import near_pairs
+from ..errors import InputError
+from ..files import Key, check_value, describe_value
+from ..model.numpy_model import fold
+from ..model.pattern import Pattern, check_fold_angle, check_pattern
 from .transcription import NLP
 
 #: Pairs closer than min_clearance (1 + MARGIN) are constrained.
@@ -91,7 +91,7 @@ def constrain(nlp: NLP, pattern: Pattern, omega: float, pairs: np.ndarray,
     folded at ``omega`` (see the module docstring). ``pairs`` are 0-based panel indices of
     two distinct panels each; :class:`InputError` for arguments of other kinds."""
     if not isinstance(nlp, NLP):
-        raise InputError(f"nlp must be the design's NLP (rffqm_nlp.transcription.NLP), got "
+        raise InputError(f"nlp must be the design's NLP (rffqm_nlp.design.transcription.NLP), got "
                          f"{describe_value(nlp)}")
     check_pattern(pattern, "pattern")
     omega = check_fold_angle(omega)
@@ -121,7 +121,7 @@ def constrain(nlp: NLP, pattern: Pattern, omega: float, pairs: np.ndarray,
 
 def panel_corners(N: int, M: int) -> np.ndarray:
     """Flat (row-major) vertex indices (N M, 4) of the corners a, b, c, d of every panel,
-    panels numbered p = (i-1) M + (j-1). N, M as :func:`rffqm_nlp.boundary.check_size`;
+    panels numbered p = (i-1) M + (j-1). N, M as :func:`rffqm_nlp.model.boundary.check_size`;
     :class:`InputError` when the indices need more memory than this machine has left."""
     N, M = check_size(N, M)
     need = 64.0 * N * M

@@ -60,7 +60,7 @@ noise) the Mesh is refused.
 
 Distances to the shape: :meth:`Mesh.closest_points` gives exact closest points on the mesh
 (:func:`closest_on_mesh`: trimesh's candidate faces, the nearest taken);
-:func:`rffqm_nlp.shape.relative_fit` the RMS and maximum distance of points to any target,
+:func:`rffqm_nlp.targets.shape.relative_fit` the RMS and maximum distance of points to any target,
 over its diameter.
 """
 
@@ -86,8 +86,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 from scipy.spatial import ConvexHull, Delaunay
 
-from .errors import RffqmError, SurfaceError
-from .files import Key, check_value
+from ..errors import RffqmError, SurfaceError
+from ..files import Key, check_value
 from .surfaces import Surface
 
 #: Largest angle between a face normal and the best-fit plane's normal for a projection.

@@ -10,7 +10,7 @@ s.2): for the a-role sector angles (alpha, beta) and sign sigma,
 which equal eq:foldAngMult, and mu1^{-sigma} = 1 / mu2^{sigma}. The fold-angle functions are
 tan(gamma2_bar/2) = -tan(omega/2)/mu2 and tan(gamma1_bar/2) = -tan(omega/2)/mu1.
 
-Every function checks its arguments (:func:`rffqm_nlp.backend.check_formula_args`: CasADi
+Every function checks its arguments (:func:`rffqm_nlp.model.backend.check_formula_args`: CasADi
 matrices, or finite real numbers and arrays broadcasting together, a sign sigma +1 or -1)
 and, on numbers, its result: where the formula has no finite value (a multiplier at its
 pole, sigma outside MV(alpha, beta); a panel whose angles sum to a multiple of pi) it
@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 
 from .backend import Scalar, check_formula_args, finite_result, is_casadi, math_for
-from .errors import InputError
+from ..errors import InputError
 
 #: Why a multiplier has no finite value, for the errors.
 _POLE = ("sigma is not in MV(alpha, beta) (cos(beta) = sigma cos(alpha)), where the "

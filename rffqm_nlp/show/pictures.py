@@ -18,20 +18,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InputError
-from .export import COLORS, draw_creases
-from .files import atomic_path
-from .foldfile import faces_vertices
-from .marching import fold
-from .pattern import Pattern, check_omega, motion_omegas
-from .shape import distances_to
+from ..errors import InputError
+from ..io.export import COLORS, draw_creases
+from ..files import atomic_path
+from ..io.foldfile import faces_vertices
+from ..model.marching import fold
+from ..model.pattern import Pattern, check_omega, motion_omegas
+from ..targets.shape import distances_to
 
 if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
     import trimesh
     from matplotlib.axes import Axes
 
-    from .collisions import CollisionReport
-    from .curvature import Curvature
+    from ..contact.collisions import CollisionReport
+    from ..targets.curvature import Curvature
 
 _KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _HISTORY_KEYS = ("iter", "objective", "inf_pr")
@@ -100,7 +100,7 @@ def plot_convergence(history: Mapping[str, Sequence[float]], path: str | os.Path
 
 
 def plot_curvature(curvature: Curvature, path: str | os.PathLike) -> Path:
-    """The curvature maps of a :class:`~rffqm_nlp.curvature.Curvature` to ``path``: a 2 x 2
+    """The curvature maps of a :class:`~rffqm_nlp.targets.curvature.Curvature` to ``path``: a 2 x 2
     figure, design K and target K above, design H and target H below, one colour scale per
     row (shared by design and target; the H scale symmetric about 0 when H changes sign),
     each (N-1, M-1) map drawn at the interior lattice points i = 1..N-1 (down) and
@@ -245,7 +245,7 @@ def _plotter(pv, size: tuple[int, int]):
 
 
 def _mark_contacts(p, mesh, contacts, M: int) -> None:
-    """Draw the panels of ``contacts`` (a :class:`~rffqm_nlp.collisions.CollisionReport`:
+    """Draw the panels of ``contacts`` (a :class:`~rffqm_nlp.contact.collisions.CollisionReport`:
     its pairs at the first contact and its flat overlaps) red, outlined in thick red."""
     panels = {(i - 1) * M + (j - 1) for pair in [*contacts.pairs, *contacts.flat_overlaps]
               for i, j in pair}
@@ -264,7 +264,7 @@ def render_png(path: str | os.PathLike, pat: Pattern, omega: float,
     target is drawn coloured by its distance to the design, with the design's creases as
     lines; with target points ((n, 3), same frame) the origami is coloured by its distance
     to them, drawn translucent; otherwise the origami is coloured by height z. With
-    ``contacts``, a :class:`~rffqm_nlp.collisions.CollisionReport` that is not free, the
+    ``contacts``, a :class:`~rffqm_nlp.contact.collisions.CollisionReport` that is not free, the
     panels in contact (at its first contact, or overlapping flat) are drawn red.
     """
     pv = _pyvista()

@@ -1,4 +1,4 @@
-"""Transcriptions of a :class:`~rffqm_nlp.design.DesignProblem` into one IPOPT NLP.
+"""Transcriptions of a :class:`~rffqm_nlp.design.problem.DesignProblem` into one IPOPT NLP.
 
 A transcription turns the declarative problem into ``(x, residuals, g, bounds, x0)``:
 
@@ -12,7 +12,7 @@ inline constraints (angle bounds, multiplier margins, the boundary MV assignment
 against the mean side) and a free correspondence's controls (:class:`Correspondence`), so
 they state the same problem. The simultaneous NLP also carries the Jacobians of its
 residuals and constraints assembled from local stencils (:class:`_ConstraintStencils`),
-which :mod:`rffqm_nlp.reduced` uses instead of CasADi's Jacobians of the whole graph.
+which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses instead of CasADi's Jacobians of the whole graph.
 """
 
 from __future__ import annotations
@@ -25,12 +25,14 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import BSpline
 
-from . import numpy_model, shape, stencils
-from . import vertex as vx
-from .backend import Scalar
-from .boundary import BoundaryData
-from .errors import InputError
-from .marching import (Evaluation, boundary_inputs, crease_quaternion, evaluate,
+from ..model import numpy_model
+from ..targets import shape
+from . import stencils
+from ..model import vertex as vx
+from ..model.backend import Scalar
+from ..model.boundary import BoundaryData
+from ..errors import InputError
+from ..model.marching import (Evaluation, boundary_inputs, crease_quaternion, evaluate,
                        folded_function, locate_failure, marched_function, panel_cell,
                        pattern_function, qmul, rotate_planar, rotated_edges)
 
@@ -64,7 +66,7 @@ class NLP:
     #: diagonal D of the Levenberg-Marquardt term of :func:`gauss_newton_hessian`
     damping_weights: np.ndarray | None = None
     #: indices in x of the design (boundary data, omega, alignment) from which the rest
-    #: marches, and of every sector angle and side: see :mod:`rffqm_nlp.reduced`
+    #: marches, and of every sector angle and side: see :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
     design_index: np.ndarray | None = None
     pattern_index: np.ndarray | None = None
     #: Function of x: the target lattice (Tx, Ty, Tz), each (N+1, M+1), of a free
@@ -75,15 +77,15 @@ class NLP:
     #: per entry of x that is boundary data, its place along the boundary: the left edge
     #: from its top (-N) down to the corner (0), then the bottom edge (to M), a side halfway
     #: between its vertices; NaN elsewhere. The state at vertex (i, j) reads only the
-    #: boundary data in [-i, j] (:mod:`rffqm_nlp.reduced` uses it to order the design)
+    #: boundary data in [-i, j] (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses it to order the design)
     boundary_position: np.ndarray | None = None
     #: per entry of x that is boundary data, its class: the array (A or B at the left
     #: edge's vertices, at the bottom edge's, LV, LH) and the parity of its index along the
     #: edge, 2 x 6 classes numbered from 0 (a Miura-ori's boundary data alternate between
-    #: two values along each edge); -1 elsewhere (:func:`rffqm_nlp.reduced.boundary_basis`)
+    #: two values along each edge); -1 elsewhere (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`)
     boundary_class: np.ndarray | None = None
     #: the Jacobians of the residuals and of g assembled from local stencils
-    #: (:mod:`rffqm_nlp.stencils`), for :mod:`rffqm_nlp.reduced`; None: only CasADi's
+    #: (:mod:`rffqm_nlp.design.stencils`), for :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`; None: only CasADi's
     #: Jacobians of the whole graph
     r_jacobian: stencils.LocalJacobian | stencils.LiftedJacobian | None = None
     g_jacobian: stencils.LocalJacobian | None = None
@@ -106,8 +108,8 @@ class NLP:
 
     def with_rows(self, rows: ca.MX, lower: np.ndarray, upper: np.ndarray) -> "NLP":
         """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
-        appended to g (e.g. :func:`rffqm_nlp.clearance.constrain`'s); with lower < upper
-        they are inequalities, which :mod:`rffqm_nlp.reduced` linearises like the others."""
+        appended to g (e.g. :func:`rffqm_nlp.design.clearance.constrain`'s); with lower < upper
+        they are inequalities, which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` linearises like the others."""
         jacobian = self.g_jacobian
         if jacobian is not None:
             n_g, n = self.g.numel(), self.x.numel()
@@ -935,7 +937,7 @@ def _residual_jacobian(setup: Setup, lay: _Layout, n_r: int
 
 
 class _StencilRows:
-    """Rows of a vector of functions stated as stencils (:mod:`rffqm_nlp.stencils`), block
+    """Rows of a vector of functions stated as stencils (:mod:`rffqm_nlp.design.stencils`), block
     after block: each block takes the next rows (:meth:`_rows`)."""
 
     FOLDED = ("Yx", "Yy", "Yz")
@@ -1088,7 +1090,7 @@ def _symbols(name: str, k: int) -> list[ca.SX]:
 
 
 class _ConstraintStencils(_StencilRows):
-    """The rows of :func:`simultaneous`'s g as stencils (:mod:`rffqm_nlp.stencils`): the
+    """The rows of :func:`simultaneous`'s g as stencils (:mod:`rffqm_nlp.design.stencils`): the
     same equations, each on one panel's or vertex's own variables. One method per block of
     rows, called in g's order, each taking the next rows."""
 

@@ -17,8 +17,8 @@ Conventions:
 Built-ins (:func:`names`, :func:`get`) validate their parameters and domain on construction,
 users add their own with :class:`Custom`, and a design file's ``[target]`` table names one
 of either (:func:`from_config`, :meth:`Surface.to_config`; a design file is read by
-:func:`rffqm_nlp.design.load_design`). A designer's mesh or point cloud becomes a surface
-with :class:`Mesh` (module ``rffqm_nlp.meshes``).
+:func:`rffqm_nlp.design.problem.load_design`). A designer's mesh or point cloud becomes a surface
+with :class:`Mesh` (module ``rffqm_nlp.targets.meshes``).
 """
 
 from __future__ import annotations
@@ -43,17 +43,18 @@ import trimesh
 from scipy.optimize import brentq
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from . import backend, memory
-from .backend import finite_array, finite_result
-from .errors import InputError, SurfaceError, one_line
-from .files import Key, check_table, check_value, describe_value, named_path, shown_name
+from ..model import backend
+from .. import memory
+from ..model.backend import finite_array, finite_result
+from ..errors import InputError, SurfaceError, one_line
+from ..files import Key, check_table, check_value, describe_value, named_path, shown_name
 
 Domain = tuple[tuple[float, float], tuple[float, float]]
 
 #: The math for a surface function's arguments (``m = mathlib(u, v); m.sin(u)``): CasADi's
 #: functions if any argument is a CasADi object, else NumPy's. Both namespaces have ``sin,
 #: cos, tan, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, fabs, where, pi``. This is
-#: :func:`rffqm_nlp.backend.math_for`, under the name surface functions use.
+#: :func:`rffqm_nlp.model.backend.math_for`, under the name surface functions use.
 mathlib = backend.math_for
 
 #: Grid (per direction) on which a new surface is checked to be finite and regular.
@@ -84,10 +85,10 @@ def refuse_points(count: float, rows: int, what: str) -> None:
 
 def check_surface(surface: Any, name: str = "target") -> "Surface":
     """``surface`` if it is a :class:`Surface` (a built-in from :func:`get`, a
-    :class:`Custom` or a :class:`~rffqm_nlp.meshes.Mesh`), else :class:`SurfaceError`
+    :class:`Custom` or a :class:`~rffqm_nlp.targets.meshes.Mesh`), else :class:`SurfaceError`
     naming ``name`` and what it got."""
     if not isinstance(surface, Surface):
-        raise SurfaceError(f"{name} must be a surface (rffqm_nlp.surfaces.get(name), "
+        raise SurfaceError(f"{name} must be a surface (rffqm_nlp.targets.surfaces.get(name), "
                            f"surfaces.Custom or surfaces.Mesh), got {describe_value(surface)}")
     return surface
 
@@ -487,7 +488,7 @@ def _xyz(fn: Callable, u: Any, v: Any, what: str, kind: type) -> tuple[Any, Any,
         raise SurfaceError(
             f"the surface callable raised {type(err).__name__}: {one_line(err)} when called "
             f"with {what}; write it with CasADi-compatible math (casadi.sin, ..., or "
-            f"rffqm_nlp.surfaces.mathlib)") from err
+            f"rffqm_nlp.targets.surfaces.mathlib)") from err
     try:
         parts = ca.vertsplit(ca.vec(out)) if backend.is_casadi(out) else list(out)
         parts = [kind(p) for p in parts]
@@ -991,4 +992,4 @@ def _solve_extent(residual: Callable[[float], float], most: float) -> float:
     return brentq(residual, 0.0, most, xtol=1e-15 * most, rtol=4 * np.finfo(float).eps)
 
 
-from .meshes import Mesh  # noqa: E402  (meshes and point clouds as targets: rffqm_nlp.meshes)
+from .meshes import Mesh  # noqa: E402  (meshes and point clouds as targets: rffqm_nlp.targets.meshes)

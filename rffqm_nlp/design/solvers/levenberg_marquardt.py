@@ -1,6 +1,6 @@
 """Levenberg-Marquardt on the marching manifold (``solver="levenberg-marquardt"``).
 
-The simultaneous NLP (:func:`rffqm_nlp.transcription.simultaneous`) states the marching
+The simultaneous NLP (:func:`rffqm_nlp.design.transcription.simultaneous`) states the marching
 equations c(x) = 0 as constraints, and IPOPT's iterates meet them only near the optimum.
 Here every iterate is a marched design: the variables are the design d (boundary angles and
 sides, omega, the rigid alignment) and every other entry of x, the state s, follows from d
@@ -49,7 +49,7 @@ problems", 2004, s.3.2), except after a step whose pattern does not march (a sid
 sector angle out of its range), which only doubles it (:data:`DOMAIN_DAMPING`). The
 metric M counts the change of the crease pattern: D_d plus S_p' D_p S_p over the sector
 angles and sides p of every vertex, with D the weights of
-:func:`rffqm_nlp.transcription.damping_weights` (a radian, or a lattice spacing, per
+:func:`rffqm_nlp.design.transcription.damping_weights` (a radian, or a lattice spacing, per
 lattice point); where lam is below :data:`METRIC_DAMPING` the last point's M serves (lam M
 is then a small part of the model, and the pattern moves little a step). B estimates the
 part of the Hessian that Gauss-Newton drops, sum r_i Hess r_i (and the active
@@ -64,7 +64,7 @@ at the optimum Gauss-Newton converges only linearly; B speeds up the end.
 A start that marches but breaks a constraint (a Miura start whose sides break the minimum
 length, a warm start carried from a coarser design that no move toward the reference
 repairs, :func:`admissible_toward`, or a clearance round's last design with its new rows,
-:mod:`rffqm_nlp.clearance`) is restored first: the steps are the same, whose QP then asks
+:mod:`rffqm_nlp.design.clearance`) is restored first: the steps are the same, whose QP then asks
 the broken rows' linearisation to reach their bounds, but a trial is judged by its largest
 violation alone, the loss free to rise. It is taken where it holds every constraint (after
 up to :data:`CORRECTIONS` corrections, as above) or, failing that, where it (the best such
@@ -102,9 +102,9 @@ from scipy.optimize import nnls
 from scipy.sparse.csgraph import maximum_bipartite_matching
 from threadpoolctl import ThreadpoolController
 
-from .errors import InputError
-from .stencils import Lift, LiftedJacobian, Structure, index_array
-from .transcription import NLP
+from ...errors import InputError
+from ..stencils import Lift, LiftedJacobian, Structure, index_array
+from ..transcription import NLP
 
 #: constraint violation up to which a marched design counts as admissible
 FEASIBLE = 1e-9
@@ -209,7 +209,7 @@ class _Linearization:
     applied to a block, and its transpose), and the reduced problem's J' J, J' r and the
     metric's B' S_p' D_p S_p B (n_u x n_u, n_u; the last None when linearised without
     it), accumulated level by level (:class:`_Window`) without storing S (unless it is
-    small). With a lifted residual Jacobian (:class:`rffqm_nlp.stencils.LiftedJacobian`),
+    small). With a lifted residual Jacobian (:class:`rffqm_nlp.design.stencils.LiftedJacobian`),
     J_design holds its direct part and ``lift`` the rest, F_u H, its columns numbered in u.
     Valid until the manifold linearises at the next point (the levels are refilled there)."""
 
@@ -264,7 +264,7 @@ class _Buffered:
 class _Sliced:
     """A fixed submatrix of a sparse Jacobian (``block``, data = 1 + the index of each
     nonzero in the Jacobian's), refilled from the Jacobian's nonzeros; its sparsity kept
-    without values (:class:`rffqm_nlp.stencils.Structure`)."""
+    without values (:class:`rffqm_nlp.design.stencils.Structure`)."""
 
     def __init__(self, block: sp.spmatrix):
         self._structure, self._index = Structure.of_pattern(block, "csr")
@@ -414,7 +414,7 @@ class _Window:
     first rows B's rows of the design variables the march reads; the lifted design variables
     (``free``, in u, n_f: a free correspondence's controls, B's identity there, which the
     march does not read) have no column: their reduced Jacobian is J_d's columns plus F_u H
-    (:class:`rffqm_nlp.stencils.Lift`, formed once a pass).
+    (:class:`rffqm_nlp.design.stencils.Lift`, formed once a pass).
 
     The pool's columns follow the boundary (``position``, (n_u,): the left edge from its
     top down to the corner, then the bottom edge; omega, the alignment and any coordinate
@@ -1058,7 +1058,7 @@ def boundary_basis(klass: np.ndarray, position: np.ndarray, knots: int
     (n_u,); None where no class has more than ``knots`` entries (B would be the identity).
 
     Each class of boundary data (``klass`` (n_d,) >= 0: one array along one edge, one
-    parity, :attr:`rffqm_nlp.transcription.NLP.boundary_class`) of m > ``knots`` entries,
+    parity, :attr:`rffqm_nlp.design.transcription.NLP.boundary_class`) of m > ``knots`` entries,
     ordered by their distance from the corner (``position``, (n_d,)), is piecewise linear
     in its index between ``knots`` knots spread evenly from its first entry to its last
     (a coordinate per knot: its entry's value); every other design variable is its own

@@ -2,14 +2,14 @@
 
 RFFQM guarantees a rigid folding motion, not that the sheet stays clear of itself.
 :func:`collisions` checks the motion omega in [0, omega_max] of a marched
-:class:`~rffqm_nlp.pattern.Pattern` for two panels that share no vertex touching,
+:class:`~rffqm_nlp.model.pattern.Pattern` for two panels that share no vertex touching,
 intersecting or coming closer than a ``clearance``.
 
 Method.
 
 * Geometry: panels are rigid and planar, so panel (i, j) with corners a = (i, j),
   b = (i+1, j), c = (i, j+1), d = (i+1, j+1) is exactly the two triangles (a, c, d) and
-  (a, d, b); folded states come from :func:`rffqm_nlp.numpy_model.fold` (batched).
+  (a, d, b); folded states come from :func:`rffqm_nlp.model.numpy_model.fold` (batched).
 * Narrow phase, vectorised over pairs of triangles: an exact intersection test by
   separating axes (the two normals, the nine edge-edge cross products and the six in-plane
   edge normals, so the coplanar case is included), and for disjoint triangles the exact
@@ -90,11 +90,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .backend import finite_array, finite_result
-from .errors import InputError
-from .files import Key, check_value, describe_value
-from .numpy_model import fold
-from .pattern import Pattern, check_fold_angle, check_pattern
+from ..model.backend import finite_array, finite_result
+from ..errors import InputError
+from ..files import Key, check_value, describe_value
+from ..model.numpy_model import fold
+from ..model.pattern import Pattern, check_fold_angle, check_pattern
 
 #: Largest coarse step in omega.
 MAX_STEP = 0.1
@@ -175,7 +175,7 @@ def collisions(pattern: Pattern, omega_max: float, *, clearance: float = 0.0,
     distance (a sheet thickness) that panels sharing no vertex must keep; ``tol`` > 0 the
     accuracy of ``first_omega`` in omega. See the module docstring for the method. Raises
     :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds (``pattern`` not a
-    :class:`~rffqm_nlp.pattern.Pattern`, ``omega_max`` not one number in [-pi, pi], ...).
+    :class:`~rffqm_nlp.model.pattern.Pattern`, ``omega_max`` not one number in [-pi, pi], ...).
     """
     check_pattern(pattern, "pattern")
     w_max = check_fold_angle(omega_max, "omega_max")
@@ -980,7 +980,7 @@ def _split(rows: np.ndarray, st: _States) -> np.ndarray:
 
 def near_pairs(pattern: Pattern, Y: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of panels that share no vertex within ``reach`` in one state, for
-    :mod:`rffqm_nlp.clearance`: the pairs (n, 2) (0-based panel indices p = (i-1) M +
+    :mod:`rffqm_nlp.design.clearance`: the pairs (n, 2) (0-based panel indices p = (i-1) M +
     (j-1), p < q) whose bounding spheres in the folded vertices Y ((N+1, M+1, 3)) come
     within ``reach`` (the broad phase), and their exact distances (n,). Raises
     :class:`~rffqm_nlp.errors.InputError` for arguments of other kinds or shapes."""

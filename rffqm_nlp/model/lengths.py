@@ -45,12 +45,12 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import linprog
 
-from . import memory
+from .. import memory
 from .backend import finite_array
 from .boundary import BoundaryData, check_boundary, check_size
-from .errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
-from .files import Key, check_value
-from .ipopt_options import NO_OPTION_FILE
+from ..errors import InfeasibleDesign, InputError, MarchingError, SolverFailed, raise_for_ipopt
+from ..files import Key, check_value
+from ..ipopt_options import NO_OPTION_FILE
 from .marching import boundary_inputs, evaluate, locate_failure, pattern_function
 from .vertex import panel_sides
 

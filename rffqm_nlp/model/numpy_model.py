@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 
 from .backend import check_formula_args, finite_array, finite_result
 from .boundary import BoundaryData, check_boundary
-from .errors import InputError, MarchingError
+from ..errors import InputError, MarchingError
 from .pattern import (Pattern, check_fold_memory, check_folded, check_march_memory, check_omega,
                       check_pattern)
 
@@ -38,10 +38,10 @@ _POLE = ("sigma is not in MV(alpha, beta) (cos(beta) = sigma cos(alpha)), where 
 
 def _vertex_args(alpha, beta, sigma) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The arguments of a one-vertex formula checked, as float arrays: finite numbers that
-    broadcast together, sigma +1 or -1 (:func:`rffqm_nlp.backend.check_formula_args`)."""
+    broadcast together, sigma +1 or -1 (:func:`rffqm_nlp.model.backend.check_formula_args`)."""
     if check_formula_args(alpha=alpha, beta=beta, sigma=sigma):
         raise InputError("the NumPy model takes numbers and NumPy arrays, not CasADi "
-                         "symbols; use rffqm_nlp.vertex for those")
+                         "symbols; use rffqm_nlp.model.vertex for those")
     return tuple(np.asarray(x, dtype=float) for x in (alpha, beta, sigma))
 
 
@@ -49,7 +49,7 @@ def _vertex_args(alpha, beta, sigma) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 def mu2(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed; the
-    arguments in :func:`rffqm_nlp.vertex.mu2`'s order. Raises :class:`InputError` for
+    arguments in :func:`rffqm_nlp.model.vertex.mu2`'s order. Raises :class:`InputError` for
     arguments that are not finite numbers broadcasting together (sigma +1 or -1) and where
     sigma is not in MV(alpha, beta) (mu2 is 0 or infinite there)."""
     alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
@@ -288,7 +288,7 @@ def fold(pat: Pattern, omega: ArrayLike) -> np.ndarray:
     each edge bounds: horizontal edges move with the panel above (the top row with the one
     below), vertical edges with the panel to the right (the last column with the one left).
     Raises :class:`InputError` when ``pat`` is not a :class:`Pattern`, for an invalid
-    omega (:func:`~rffqm_nlp.pattern.check_omega`), when the states need more memory than
+    omega (:func:`~rffqm_nlp.model.pattern.check_omega`), when the states need more memory than
     this machine has left, and when the pattern has no finite folded state (a vertex
     outside MV(alpha, beta): a pattern that was not marched).
     """

@@ -1,6 +1,6 @@
 """FOLD 1.2 files: the numbering of vertices, edges and faces, writing, reading, validating.
 
-Numbering (shared with the crease and mesh writers of :mod:`rffqm_nlp.export`): vertex
+Numbering (shared with the crease and mesh writers of :mod:`rffqm_nlp.io.export`): vertex
 (i, j) (1-based) is FOLD vertex ``(i-1)(M+1) + (j-1)``; the edges are the horizontal edges
 (i, j) -> (i, j+1) row by row, then the vertical edges (i, j) -> (i+1, j) row by row; the
 faces are the panels (i, j) row by row, counter-clockwise a, c, d, b in the flat pattern.
@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
-from .errors import InputError
-from .files import describe_value, jsonable, read_json, write_json
-from .marching import fold, fold_angles
-from .pattern import Pattern, check_fold_angle, check_omega, motion_omegas
-from .results import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
+from .._version import __version__
+from ..errors import InputError
+from ..files import describe_value, jsonable, read_json, write_json
+from ..model.marching import fold, fold_angles
+from ..model.pattern import Pattern, check_fold_angle, check_omega, motion_omegas
+from ..design.results import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
 
 CREATOR = "rffqm-nlp"
 PREFIX = "rffqm:"
@@ -119,7 +119,7 @@ def edge_assignments(pat: Pattern, omega: float) -> np.ndarray:
 # --------------------------------------------------------------------------- FOLD
 def frame_omegas(omega: float, frames: int | np.ndarray | None) -> np.ndarray:
     """The omegas of the folding frames: none, ``frames`` values from 0 to ``omega``
-    (:func:`~rffqm_nlp.pattern.motion_omegas`) or the explicit omegas ``frames``."""
+    (:func:`~rffqm_nlp.model.pattern.motion_omegas`) or the explicit omegas ``frames``."""
     if frames is None:
         return np.zeros(0)
     if isinstance(frames, (int, np.integer)):
@@ -364,9 +364,9 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
     ``metadata`` holds the ``rffqm:`` keys of the file other than omega, pattern and
     version, without the prefix. The design data are checked as a saved result's are:
     no number anywhere NaN, infinite or too large for a float
-    (:func:`rffqm_nlp.results.check_numbers`), ``rffqm:pattern`` admissible and equal to
+    (:func:`rffqm_nlp.design.results.check_numbers`), ``rffqm:pattern`` admissible and equal to
     its boundary data re-marched with the NumPy model
-    (:func:`rffqm_nlp.results.checked_pattern`), ``rffqm:omega`` in [-pi, pi], and the
+    (:func:`rffqm_nlp.design.results.checked_pattern`), ``rffqm:omega`` in [-pi, pi], and the
     flat coordinates those of the pattern. Raises :class:`InputError` (one line, never
     quoting the file's content) for a file that is not valid JSON (or no regular file: a
     folder, a FIFO, a device), not a FOLD file, not written by this package, or whose

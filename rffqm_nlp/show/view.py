@@ -4,7 +4,7 @@ The page shows, in the target's frame (every state moved by the design's rigid m
 ``rotation @ y + translation``, as :attr:`DesignResult.folded`):
 
 * the folded pattern as one shaded Mesh3d, two triangles per panel (the split of
-  :func:`rffqm_nlp.export.triangles`), coloured by the distance of each pattern vertex to
+  :func:`rffqm_nlp.io.export.triangles`), coloured by the distance of each pattern vertex to
   the target surface. The target surface is taken as the bilinear patches of the target
   lattice, sampled :data:`TARGET_REFINE` times finer in each direction (fewer times where
   that would make more than :data:`MAX_SAMPLES` samples: :func:`refinement`); a vertex's
@@ -20,9 +20,9 @@ The page shows, in the target's frame (every state moved by the design's rigid m
   up to about 30 s for a design far from its target.);
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
-  designed omega (:func:`rffqm_nlp.foldfile.edge_assignments`);
+  designed omega (:func:`rffqm_nlp.io.foldfile.edge_assignments`);
 * the target surface, hidden until its button is pressed: the mesh of
-  :func:`rffqm_nlp.results.target_mesh` (the kept ``result.target_grid``, or the surface
+  :func:`rffqm_nlp.design.results.target_mesh` (the kept ``result.target_grid``, or the surface
   rebuilt from the result's config without running code), or the target lattice when the
   target cannot be rebuilt;
 * a slider through the folding motion from flat (omega = 0) to folded flat (omega = +-pi,
@@ -59,17 +59,17 @@ import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
 from scipy.spatial import cKDTree
 
-from . import numpy_model
-from .errors import InputError, RffqmError
-from .export import COLORS, triangles
-from .files import Key, check_value, write_text
-from .foldfile import edge_assignments
-from .pattern import motion_omegas
-from .surfaces import Surface, grid_faces
+from ..model import numpy_model
+from ..errors import InputError, RffqmError
+from ..io.export import COLORS, triangles
+from ..files import Key, check_value, write_text
+from ..io.foldfile import edge_assignments
+from ..model.pattern import motion_omegas
+from ..targets.surfaces import Surface, grid_faces
 
 if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html_
-    from .pattern import Pattern
-    from .results import DesignResult
+    from ..model.pattern import Pattern
+    from ..design.results import DesignResult
 
 #: Significant digits (of the largest coordinate) kept in the page.
 SIGNIFICANT = 4
@@ -375,7 +375,7 @@ def _target_shape(result: DesignResult, target: Surface | None
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (k, 3) and triangles (f, 3) of the target drawn: :func:`target_mesh`, or
     the cells of the target lattice when the target cannot be rebuilt."""
-    from .results import target_mesh
+    from ..design.results import target_mesh
 
     try:
         mesh = target_mesh(result, target)

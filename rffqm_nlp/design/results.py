@@ -15,13 +15,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import trimesh
 
-from . import numpy_model, surfaces
-from .boundary import BoundaryData
-from .curvature import Curvature
-from .errors import InputError, MarchingError, RffqmError, safe_text
-from .files import Key, check_table, describe_value, jsonable, read_json, shown_name, write_json
-from .pattern import Pattern, check_omega
-from .shape import coarse_grain
+from ..model import numpy_model
+from ..targets import surfaces
+from ..model.boundary import BoundaryData
+from ..targets.curvature import Curvature
+from ..errors import InputError, MarchingError, RffqmError, safe_text
+from ..files import Key, check_table, describe_value, jsonable, read_json, shown_name, write_json
+from ..model.pattern import Pattern, check_omega
+from ..targets.shape import coarse_grain
 
 if TYPE_CHECKING:  # plotly is imported by the view, on use
     import plotly.graph_objects
@@ -63,7 +64,7 @@ HISTORY_KEYS: dict[str, Key] = {
     "inf_pr": Key("list", item=Key("number", low=0.0), required=True),
     "elapsed": Key("list", item=Key("number", low=0.0), required=True),
 }
-#: One start of a multistart's record (see :func:`rffqm_nlp.design.solve_multistart`).
+#: One start of a multistart's record (see :func:`rffqm_nlp.design.problem.solve_multistart`).
 MULTISTART_RUN_KEYS: dict[str, Key] = {
     "start": Key("whole", low=0, required=True),
     "alpha0": Key("number", low=0.0, high=math.pi, required=True),
@@ -110,17 +111,17 @@ class Fit:
       (corresponding points);
     * ``rms_surface``, ``hausdorff``: RMS and largest distance of the coarse lattice to the
       target's shape (exact closest points on r(u, v) over the domain, or on the mesh of a
-      :class:`~rffqm_nlp.meshes.Mesh`);
+      :class:`~rffqm_nlp.targets.meshes.Mesh`);
     * ``rms_surface_vertices``, ``hausdorff_vertices``: the same for every folded vertex;
     * ``coverage``: the area of the coarse lattice (two triangles per cell) over the area of
-      r(u, v) over the target's domain (:func:`rffqm_nlp.shape.surface_area`);
+      r(u, v) over the target's domain (:func:`rffqm_nlp.targets.shape.surface_area`);
     * ``plane_rms``: RMS distance of the target lattice to its best-fitting plane (the fit a
       flat sheet reaches, for comparison);
     * ``min_side_over_mean``: the smallest side length over the mean side length;
     * ``min_sector_angle``: the smallest sector angle (radians);
     * ``collision_free``: whether the motion from omega = 0 to the designed omega is free
       of self-contact: no flat overlap and no two panels that share no vertex touching
-      (:func:`rffqm_nlp.collisions.collisions`); ``first_contact_omega``: the omega of the
+      (:func:`rffqm_nlp.contact.collisions.collisions`); ``first_contact_omega``: the omega of the
       first contact, or None (not relative: radians). Both None in a result saved before
       the check.
 
@@ -182,14 +183,14 @@ class SolveStats:
     * ``restoration_iterations``: those of ``marched_iterations`` that Levenberg-Marquardt
       took from a start that broke a constraint toward one that holds them all (the Miura
       start where ``min_length`` is above its smallest side, a warm start that no move
-      repaired, a clearance round's start; :mod:`rffqm_nlp.reduced`);
+      repaired, a clearance round's start; :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`);
     * ``build_time``, ``solve_time``: seconds spent building the NLPs and solvers, and the rest;
     * ``objective``: the final objective (the loss);
     * ``solver``, ``transcription``, ``hessian``: the options they ran with;
     * ``history``: per iteration, lists "iter", "objective", "inf_pr" (largest constraint
       violation) and "elapsed" (seconds since the solve started);
     * ``multistart``: None, or the record of a multistart (see
-      :func:`rffqm_nlp.design.solve_multistart`).
+      :func:`rffqm_nlp.design.problem.solve_multistart`).
     """
 
     status: str
@@ -256,13 +257,13 @@ class DesignResult:
     * ``problem``: {"target", "design", "solve"}: the problem and the options it was solved
       with, as TOML-ready tables;
     * ``x``: the solver's final design vector (for warm starts);
-    * ``curvature``: the :class:`~rffqm_nlp.curvature.Curvature` maps of the design and
+    * ``curvature``: the :class:`~rffqm_nlp.targets.curvature.Curvature` maps of the design and
       the target, each (N/2 - 1, M/2 - 1) (None when not computed);
     * ``target_grid``: (n, m, 3) samples of the target surface, uniform in its parameters,
       kept when ``problem["target"]`` cannot rebuild it (a lambda or closure: see
-      :func:`rffqm_nlp.surfaces.config_of`), else None.
+      :func:`rffqm_nlp.targets.surfaces.config_of`), else None.
 
-    In a notebook a result shows its interactive view (:mod:`rffqm_nlp.view`).
+    In a notebook a result shows its interactive view (:mod:`rffqm_nlp.show.view`).
     """
 
     boundary: BoundaryData
@@ -285,14 +286,16 @@ class DesignResult:
         return coarse_grain(self.folded)
 
     def _repr_html_(self) -> str:
-        """The interactive view in a notebook (:func:`rffqm_nlp.view.repr_html`)."""
-        from .view import repr_html
+        """The interactive view in a notebook (:func:`rffqm_nlp.show.view.repr_html`)."""
+        # up a floor, on use: a result shows itself (README), the view floor reads results
+        from ..show.view import repr_html
 
         return repr_html(self)
 
     def view(self, frames: int = 24) -> plotly.graph_objects.Figure:
-        """The interactive view as a plotly Figure (:func:`rffqm_nlp.view.figure`)."""
-        from .view import figure
+        """The interactive view as a plotly Figure (:func:`rffqm_nlp.show.view.figure`)."""
+        # up a floor, on use, as in _repr_html_
+        from ..show.view import figure
 
         return figure(self, frames)
 
@@ -367,7 +370,7 @@ def target_mesh(result: DesignResult, target: surfaces.Surface | None = None,
     """The target as a triangle mesh in the target frame (that of ``result.folded``), for
     pictures: ``target`` when given, else the kept ``result.target_grid`` (two triangles per
     cell), else the surface rebuilt from ``result.problem["target"]`` (code that it names
-    is run only with ``trust``). A :class:`~rffqm_nlp.meshes.Mesh` made from a triangle
+    is run only with ``trust``). A :class:`~rffqm_nlp.targets.meshes.Mesh` made from a triangle
     mesh gives those triangles, any other surface its n x n sample (:meth:`Surface.mesh`).
 
     Raises :class:`RffqmError` (one line) when the target cannot be rebuilt; draw
@@ -446,7 +449,7 @@ def checked_pattern(d: Any, source: str, boundary: BoundaryData | None = None,
     alpha), its boundary data admissible (``boundary``, else the data it carries: the
     triples of its left column and bottom row, its left and bottom sides), and every array
     equal, to :data:`REMARCH_RTOL` relative, to those boundary data re-marched with the
-    independent NumPy model (:func:`rffqm_nlp.numpy_model.march`). ``where`` names the
+    independent NumPy model (:func:`rffqm_nlp.model.numpy_model.march`). ``where`` names the
     table in the errors ("pattern", "rffqm:pattern"); each is one :class:`InputError`
     line. Returns the stored pattern."""
     if not isinstance(d, Mapping):

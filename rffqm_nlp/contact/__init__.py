@@ -1,0 +1,1 @@
+"""Self-contact of a folding pattern along its motion (:mod:`.collisions`)."""

@@ -1,0 +1,1 @@
+"""Pictures (:mod:`.pictures`) and the interactive HTML view (:mod:`.view`) of a design."""
