@@ -543,3 +543,11 @@ def test_gradients_match_central_differences():
         fd = (F(x0 + h * d)[0].full() - F(x0 - h * d)[0].full()).ravel() / (2 * h)
         jd = (J @ d).ravel()
         assert np.linalg.norm(fd - jd) <= 1e-6 * np.linalg.norm(jd)
+
+
+def test_the_graph_caches_are_bounded():
+    """A sweep over sizes keeps at most SIZE_CACHE graphs of each kind, not one per size."""
+    before = mg.cached_graphs()
+    for n in range(1, 5 * mg.SIZE_CACHE + 1):
+        mg.fold_function(n, 1)
+    assert mg.cached_graphs() - before <= 2 * mg.SIZE_CACHE

@@ -34,8 +34,13 @@ PI = np.pi
 MU_TOL = 1e-12
 
 
+#: CasADi functions kept for each kind of graph, for the sizes used last: a sweep over
+#: sizes would otherwise hold every size's graphs (:func:`cached_graphs`).
+SIZE_CACHE = 8
+
+
 # --------------------------------------------------------------------------- pattern
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=1)
 def panel_cell() -> ca.Function:
     """One panel (i, j): vertex triples of b, a, c and sides l_ab, l_ac -> vertex d, sides.
 
@@ -60,7 +65,7 @@ def panel_cell() -> ca.Function:
                        ["x", "u"], ["x_next", "y"])
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _row_step(M: int) -> ca.Function:
     """Row i of vertices (3 x M+1), its lengths lh (1 x M) and the left data -> row i+1."""
     along_row = panel_cell().mapaccum("row", M)
@@ -84,7 +89,7 @@ def pattern_function(N: int, M: int) -> ca.Function:
     return _pattern_function(*check_size(N, M))
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _pattern_function(N: int, M: int) -> ca.Function:
     left = ca.MX.sym("left", 3, N + 1)
     bottom = ca.MX.sym("bottom", 3, M)
@@ -280,7 +285,7 @@ def panel_quaternions_function(N: int, M: int) -> ca.Function:
     return _panel_quaternions_function(*check_size(N, M))
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _panel_quaternions_function(N: int, M: int) -> ca.Function:
     alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
     lh = ca.MX.sym("lh", N + 1, M)
@@ -310,7 +315,7 @@ def _qmul(p, q):
             pw * qz + px * qy - py * qx + pz * qw)
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _qmul_step(width: int) -> ca.Function:
     P = ca.MX.sym("P", 4, width)
     Q = ca.MX.sym("Q", 4, width)
@@ -353,7 +358,7 @@ def fold_function(N: int, M: int) -> ca.Function:
     return _fold_function(*check_size(N, M))
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _fold_function(N: int, M: int) -> ca.Function:
     alpha, beta, sigma = (ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma"))
     lh = ca.MX.sym("lh", N + 1, M)
@@ -374,7 +379,7 @@ def folded_function(N: int, M: int) -> ca.Function:
     return _folded_function(*check_size(N, M))
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _folded_function(N: int, M: int) -> ca.Function:
     pattern = _pattern_function(N, M)
     inputs = pattern.mx_in()
@@ -399,7 +404,7 @@ def marched_function(N: int, M: int) -> ca.Function:
     return _marched_function(*check_size(N, M))
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _marched_function(N: int, M: int) -> ca.Function:
     pattern = _pattern_function(N, M)
     inputs = pattern.mx_in()
@@ -696,7 +701,17 @@ def fold_angles(pat: Pattern, omega: float) -> tuple[np.ndarray, np.ndarray]:
     return check_folded(gh), check_folded(gv)
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=SIZE_CACHE)
 def _multiplier_function(N: int, M: int) -> ca.Function:
     sym = [ca.MX.sym(n, N + 1, M + 1) for n in ("alpha", "beta", "sigma")]
     return ca.Function("multipliers", sym, list(_fold_multipliers(*sym)))
+
+
+def cached_graphs() -> int:
+    """How many size-keyed CasADi functions this module holds now (each kind keeps at most
+    :data:`SIZE_CACHE`)."""
+    return sum(f.cache_info().currsize for f in _SIZE_KEYED)
+
+
+_SIZE_KEYED = tuple(f for f in list(globals().values())
+                    if callable(f) and hasattr(f, "cache_info") and f is not panel_cell)
