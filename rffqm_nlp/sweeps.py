@@ -35,7 +35,8 @@ existing scheduler by address, or serially in this process with ``scheduler="non
 the same task function :func:`solve_design`) and streams the outcomes into ``OUT``:
 
 * ``designs/<id>/row.json``: the design's table row and configuration, written last;
-* ``designs/<id>/result.json``: the :class:`~rffqm_nlp.design.results.DesignResult` of a solved design;
+* ``designs/<id>/result.json``: the :class:`~rffqm_nlp.design.results.DesignResult` of a
+  solved design;
 * ``results.parquet`` and ``results.csv``: one row per finished design, rewritten
   atomically as each design finishes; in the CSV every text cell that a spreadsheet would
   read as a formula is prefixed with ``'`` (:func:`csv_frame`), the Parquet file keeps the

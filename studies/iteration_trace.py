@@ -2,7 +2,8 @@
 
 A bundled target (``--target``, default the sphere cap) at n x n panels (``--n``, default 20),
 solved with its file's options to the optimality conditions (Levenberg-Marquardt on the
-marching manifold, :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`), each accepted step in a row: the loss and its
+marching manifold, :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`), each accepted step in a
+row: the loss and its
 gap to the final loss (relative), the damping lam of the step taken, the rows of the step's
 QP (working: the rows it was given; active: those with a nonzero multiplier), the trial
 steps taken (a step that broke a constraint and was corrected, or failed and raised lam,
@@ -13,7 +14,8 @@ no longer changed, and the mean contraction of the loss gap between two given st
 (``--from``, ``--to``).
 
 The trace wraps the solver's internals (the step, the optimality test and the
-linearisation of :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) and changes nothing in the solve.
+linearisation of :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) and changes nothing in the
+solve.
 
     .venv/bin/python studies/iteration_trace.py [--target sphere_cap] [--n 20] [--from 10]
         [--to 30] [--out studies/results]

@@ -2,7 +2,8 @@
 problem, and conjugate gradients with and without preconditioners.
 
 At the Miura start of a bundled target (marched, as the solver's first iterate) with n x n
-panels: the dense Gauss-Newton model of :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` (J' J and the metric M =
+panels: the dense Gauss-Newton model of :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` (J' J
+and the metric M =
 D_d + S_p' D_p S_p from one pass over the levels) at the target file's first damping lam.
 Reported:
 

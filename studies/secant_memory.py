@@ -2,7 +2,8 @@
 the default solve (Levenberg-Marquardt on the marching manifold, run to the optimality
 conditions) against ``reduced.SECANT_PAIRS``.
 
-B is NL2SOL's structured secant update (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) applied, from zero at
+B is NL2SOL's structured secant update (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`)
+applied, from zero at
 every iteration, to the last ``SECANT_PAIRS`` accepted steps; "all" keeps every step, which
 is the update applied once per step to the running B (the solver before 2026-12-03). The
 problems: the bundled targets (targets/*.toml, ``stop_rms`` dropped) at ``--sizes`` panels a

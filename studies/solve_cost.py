@@ -3,7 +3,8 @@
 The first table solves the bundled targets with their target files' options and
 ``stop_rms`` = ``common.STOP_RMS`` (0.9%; the files' own value until 2026-12-01) in each
 transcription with IPOPT and the exact or the damped Gauss-Newton Hessian, and with
-Levenberg-Marquardt on the marching manifold (simultaneous only; at 20 x 20 panels; at 40 x 40, and at the ``--large`` sizes, the simultaneous transcription only),
+Levenberg-Marquardt on the marching manifold (simultaneous only; at 20 x 20 panels; at 40 x 40,
+and at the ``--large`` sizes, the simultaneous transcription only),
 and splits IPOPT's time (its own timing statistics) into the linear solves (factorisation
 and back-solves of the KKT system, MUMPS) and the NLP function evaluations (CasADi:
 objective, constraints and their derivatives). The simultaneous NLP with IPOPT and the
@@ -127,7 +128,8 @@ def main() -> None:
         f"for at most {GAUSS_NEWTON_ITERATIONS} iterations, then exact; one fresh "
         "subprocess per run", "",
         "## Transcription, solver and Hessian", "",
-        "Hessian: IPOPT's, or levenberg-marquardt for that solver (`rffqm_nlp.design.solvers.levenberg_marquardt`; "
+        "Hessian: IPOPT's, or levenberg-marquardt for that solver "
+        "(`rffqm_nlp.design.solvers.levenberg_marquardt`; "
         "its sensitivities and QPs count in neither IPOPT column); "
         "iterations: all, in parentheses those with the Gauss-Newton Hessian; build: "
         "transcription and IPOPT solver construction; linear solves and NLP functions: "

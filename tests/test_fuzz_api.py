@@ -48,7 +48,8 @@ from rffqm_nlp.targets import surfaces
 from rffqm_nlp.model import vertex
 from rffqm_nlp.errors import RffqmError
 
-collisions = importlib.import_module("rffqm_nlp.contact.collisions")    # rq.collisions is the function
+# rq.collisions is the function, so the module by its name
+collisions = importlib.import_module("rffqm_nlp.contact.collisions")
 clearance = importlib.import_module("rffqm_nlp.design.clearance")
 
 #: The modules whose public callables are fuzzed.

@@ -16,7 +16,8 @@ that come close, refreshed as the design moves (docs/collisions.md):
   gap is a lower bound of the Euclidean distance of two convex panels, so rows that hold
   keep the pair at least c apart (conservative when the closest features are two
   corners or a corner and an edge).
-* The rows are appended to the NLP's constraints (:meth:`rffqm_nlp.design.transcription.NLP.with_rows`),
+* The rows are appended to the NLP's constraints
+  (:meth:`rffqm_nlp.design.transcription.NLP.with_rows`),
   written in the NLP's folded vertices (variables of the simultaneous transcription).
 """
 

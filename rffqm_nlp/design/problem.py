@@ -6,7 +6,8 @@ mountain-valley assignment held fixed, the inline manufacturability constraints 
 :class:`SolveOptions` states how: the solver, the transcription, IPOPT's Hessian and the
 limits. :meth:`DesignProblem.solve` transcribes the problem
 (:mod:`rffqm_nlp.design.transcription`), runs Levenberg-Marquardt on the marching manifold
-(:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) and/or IPOPT, re-marches the answer with the independent NumPy
+(:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) and/or IPOPT, re-marches the answer with the
+independent NumPy
 model and returns a :class:`~rffqm_nlp.design.results.DesignResult`. A design file has the tables
 [target], [design] and [solve] (:func:`load_design`). Measurements of the solvers and
 options: docs/solvers.md.
@@ -140,7 +141,8 @@ class SolveOptions:
     """How a :class:`DesignProblem` is solved (the [solve] table of a design file).
 
     * ``solver``: "levenberg-marquardt" (the default) or "ipopt". Levenberg-Marquardt runs
-      on the marching manifold (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`, simultaneous transcription only):
+      on the marching manifold (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`, simultaneous
+      transcription only):
       its variables are the boundary data, omega and the alignment, every iterate is
       re-marched, so every iterate is an admissible design (after restoration steps from a
       start that breaks a constraint), and the inequalities enter each step linearised (a
@@ -184,7 +186,8 @@ class SolveOptions:
       (:func:`solve_multistart`); ``seed``: the seed of their perturbations;
     * ``boundary_knots``: Levenberg-Marquardt steps first in a coarse basis of the boundary
       data, each of its 12 classes (A, B at either edge, LV, LH; each parity) piecewise
-      linear between at most this many knots (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`),
+      linear between at most this many knots
+      (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`),
       then, unless ``stop_rms`` was reached there, in the whole design from its end; 0: the
       whole design from the start. Patterns up to about 2 x ``boundary_knots`` panels a side
       have no coarser basis.
@@ -477,7 +480,8 @@ class DesignProblem:
         pattern; a free correspondence's map is kept, see :meth:`transcribe`); where it
         breaks a constraint, solver "levenberg-marquardt" starts from its free boundary
         data moved part or all of the way toward the Miura's (``stats.start_moved``,
-        :func:`rffqm_nlp.design.solvers.levenberg_marquardt.admissible_toward`), or where no such point holds every
+        :func:`rffqm_nlp.design.solvers.levenberg_marquardt.admissible_toward`), or where no such
+        point holds every
         constraint restores the warm start itself (``stats.restoration_iterations``), and
         IPOPT starts from it where that fails too.
         ``verbose``: IPOPT prints its iterations.
@@ -588,8 +592,9 @@ class DesignProblem:
                                    options: SolveOptions, record: "_Record", x: np.ndarray,
                                    reference: Callable[[], np.ndarray] | None = None
                                    ) -> "_Outcome | None":
-        """Levenberg-Marquardt on the marching manifold (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) from x
-        (or, where x breaks a constraint, x moved toward ``reference()``, or restored), every
+        """Levenberg-Marquardt on the marching manifold
+        (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt`) from x (or, where x breaks a
+        constraint, x moved toward ``reference()``, or restored), every
         step recorded; None when it reached no admissible point (its restoration steps, if
         any, counted), unless the iterations or the time ran out in the restoration
         (:meth:`_restoration_cut_short`)."""
@@ -863,12 +868,13 @@ MEMORY_SEQUENTIAL_BUILD = 700e6
 MEMORY_FREE_PER_PANEL = 1e3
 #: ... and for Levenberg-Marquardt the working set of its sensitivity: about
 #: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs,
-#: :class:`rffqm_nlp.design.solvers.levenberg_marquardt._Window`, as measured in docs/solvers.md, and the identity
+#: :class:`rffqm_nlp.design.solvers.levenberg_marquardt._Window`, as measured in docs/solvers.md,
+# and the identity
 #: over the 3 (P + Q) design variables) by those design variables, 8 bytes each ...
 WORKING_SET = 22
 #: ... and its dense design x design matrices held at once (J'J, the metric, the secant
 #: term, the damped matrix and its factor, the last iteration's, the step QP's copy):
-#: counted in reduced.py, not fitted.
+#: counted in design/solvers/levenberg_marquardt.py, not fitted.
 DESIGN_MATRICES = 10
 
 

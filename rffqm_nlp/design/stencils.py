@@ -134,7 +134,8 @@ class LocalJacobian:
     must cover every row of g once.
 
     :meth:`pattern` gives its sparsity with data = 1 + the index of each nonzero, and
-    calling it at x its nonzeros (nnz,) in that order (what :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
+    calling it at x its nonzeros (nnz,) in that order (what
+    :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
     slices). The maps and the scatter are built at the first use.
     """
 
@@ -267,7 +268,8 @@ class LiftedJacobian:
     columns, and CasADi's build of it is not cheap. So the two parts stay apart:
     :meth:`pattern` gives F_x's sparsity (the rows' direct dependence on x) with data = 1 +
     the index of each nonzero, and calling it at x gives F_x's nonzeros in that order and
-    the :class:`Lift` F_u H (what :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` reduces without forming it).
+    the :class:`Lift` F_u H (what :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` reduces
+    without forming it).
     """
 
     def __init__(self, inner: LocalJacobian,

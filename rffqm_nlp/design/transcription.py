@@ -12,7 +12,8 @@ inline constraints (angle bounds, multiplier margins, the boundary MV assignment
 against the mean side) and a free correspondence's controls (:class:`Correspondence`), so
 they state the same problem. The simultaneous NLP also carries the Jacobians of its
 residuals and constraints assembled from local stencils (:class:`_ConstraintStencils`),
-which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses instead of CasADi's Jacobians of the whole graph.
+which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses instead of CasADi's Jacobians of
+the whole graph.
 """
 
 from __future__ import annotations
@@ -66,7 +67,8 @@ class NLP:
     #: diagonal D of the Levenberg-Marquardt term of :func:`gauss_newton_hessian`
     damping_weights: np.ndarray | None = None
     #: indices in x of the design (boundary data, omega, alignment) from which the rest
-    #: marches, and of every sector angle and side: see :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
+    #: marches, and of every sector angle and side: see
+    #: :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
     design_index: np.ndarray | None = None
     pattern_index: np.ndarray | None = None
     #: Function of x: the target lattice (Tx, Ty, Tz), each (N+1, M+1), of a free
@@ -77,15 +79,18 @@ class NLP:
     #: per entry of x that is boundary data, its place along the boundary: the left edge
     #: from its top (-N) down to the corner (0), then the bottom edge (to M), a side halfway
     #: between its vertices; NaN elsewhere. The state at vertex (i, j) reads only the
-    #: boundary data in [-i, j] (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses it to order the design)
+    #: boundary data in [-i, j] (:mod:`rffqm_nlp.design.solvers.levenberg_marquardt` uses it to
+    #: order the design)
     boundary_position: np.ndarray | None = None
     #: per entry of x that is boundary data, its class: the array (A or B at the left
     #: edge's vertices, at the bottom edge's, LV, LH) and the parity of its index along the
     #: edge, 2 x 6 classes numbered from 0 (a Miura-ori's boundary data alternate between
-    #: two values along each edge); -1 elsewhere (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`)
+    #: two values along each edge); -1 elsewhere
+    #: (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`)
     boundary_class: np.ndarray | None = None
     #: the Jacobians of the residuals and of g assembled from local stencils
-    #: (:mod:`rffqm_nlp.design.stencils`), for :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`; None: only CasADi's
+    #: (:mod:`rffqm_nlp.design.stencils`), for
+    #: :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`; None: only CasADi's
     #: Jacobians of the whole graph
     r_jacobian: stencils.LocalJacobian | stencils.LiftedJacobian | None = None
     g_jacobian: stencils.LocalJacobian | None = None
@@ -109,7 +114,8 @@ class NLP:
     def with_rows(self, rows: ca.MX, lower: np.ndarray, upper: np.ndarray) -> "NLP":
         """This NLP with the constraint rows ``lower <= rows(x) <= upper`` (each (n,))
         appended to g (e.g. :func:`rffqm_nlp.design.clearance.constrain`'s); with lower < upper
-        they are inequalities, which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt` linearises like the others."""
+        they are inequalities, which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
+        linearises like the others."""
         jacobian = self.g_jacobian
         if jacobian is not None:
             n_g, n = self.g.numel(), self.x.numel()
@@ -694,7 +700,8 @@ def _sides_by_antidiagonal(N: int, M: int) -> np.ndarray:
     """The sides [vec(LH); vec(LV)] (column-major, K = (N+1) M + N (M+1)) ordered by the
     anti-diagonal i + j of their first vertex (i, j), then i: the march reaches them in
     that order, so that a partial mean of :class:`_MeanTree` waits for sides of about one
-    anti-diagonal only (the Levenberg-Marquardt pass holds fewer rows, :mod:`reduced`)."""
+    anti-diagonal only (the Levenberg-Marquardt pass holds fewer rows,
+    :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`)."""
     i = np.concatenate([np.tile(np.arange(N + 1), M), np.tile(np.arange(N), M + 1)])
     j = np.concatenate([np.repeat(np.arange(M), N + 1), np.repeat(np.arange(M + 1), N)])
     return np.lexsort((i, i + j))

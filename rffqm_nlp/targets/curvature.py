@@ -5,7 +5,8 @@ At every interior point of an (n, m) lattice the discrete first and second funda
 forms are those of the loss (:func:`rffqm_nlp.targets.shape.fundamental_forms`: central
 differences, unit spacings); from them K = det(II) / det(I) = (L N - M^2) / (E G - F^2) and
 H = tr(I^-1 II) / 2 = (E N - 2 F M + G L) / (2 (E G - F^2)), the formulas of
-:mod:`rffqm_nlp.targets.surfaces` (neither depends on the spacings). H takes the sign of the target's
+:mod:`rffqm_nlp.targets.surfaces` (neither depends on the spacings). H takes the sign of the
+target's
 normal: the design's discrete normal r_u x r_v is turned, point by point, to agree with the
 target lattice's, which is the target surface's r_u x r_v up to the differences.
 """
@@ -47,7 +48,8 @@ class Curvature:
 
 def _normals(P: np.ndarray) -> np.ndarray:
     """Discrete unit normals r_u x r_v / |r_u x r_v| at the interior points of P (n, m, 3)
-    with the central differences of :func:`rffqm_nlp.targets.shape.fundamental_forms`, (n-2, m-2, 3)."""
+    with the central differences of :func:`rffqm_nlp.targets.shape.fundamental_forms`,
+    (n-2, m-2, 3)."""
     r_u = P[2:, 1:-1] - P[:-2, 1:-1]
     r_v = P[1:-1, 2:] - P[1:-1, :-2]
     cross = np.cross(r_u, r_v)

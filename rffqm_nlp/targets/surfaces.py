@@ -992,4 +992,5 @@ def _solve_extent(residual: Callable[[float], float], most: float) -> float:
     return brentq(residual, 0.0, most, xtol=1e-15 * most, rtol=4 * np.finfo(float).eps)
 
 
-from .meshes import Mesh  # noqa: E402  (meshes and point clouds as targets: rffqm_nlp.targets.meshes)
+# meshes and point clouds as targets (rffqm_nlp.targets.meshes); last: meshes imports this
+from .meshes import Mesh  # noqa: E402
