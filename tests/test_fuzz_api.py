@@ -274,7 +274,8 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "files.describe_value": (rq.files.describe_value, dict(value=np.array(2.5))),
 }
 #: Calls that take no arguments: called once each, their results checked.
-NO_ARGUMENTS = {"surfaces.names": surfaces.names, "marching.panel_cell": marching.panel_cell}
+NO_ARGUMENTS = {"surfaces.names": surfaces.names, "marching.panel_cell": marching.panel_cell,
+                "marching.cached_graphs": marching.cached_graphs}
 #: Calls whose results are what a CasADi Function computes from its inputs (NaN marks a
 #: failed march there): only their refusals are checked.
 UNCHECKED_RESULTS = {"marching.evaluate", "marching.Evaluation", "marching.Evaluation.set"}
