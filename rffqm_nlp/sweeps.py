@@ -119,8 +119,8 @@ ROW_VERSION = 1
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 #: Most designs a study may have: its grid (cases x the product of the lists' lengths) or
 #: its ``sample``, counted before any design is built. Every design is checked before the
-#: first solve (about 6 ms each for an 8 x 8 sphere cap: a minute at the limit) and the
-#: table is rewritten as each design finishes (0.9 s for 10,000 rows).
+#: first solve, and the table is rewritten as each design finishes (the cost of both at
+#: the limit: docs/sweeps.md, "Limits").
 MAX_DESIGNS = 10_000
 #: Most parameters a study may vary ([sweep] keys and the cases' keys together).
 MAX_PARAMETERS = 100

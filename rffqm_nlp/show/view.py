@@ -15,9 +15,8 @@ The page shows, in the target's frame (every state moved by the design's rigid m
   every s-th sample, too large by at most 1/:data:`SCALE_STEPS` of the scale
   (:func:`scale_stride`). A vertex of another state beyond the scale, drawn in its top
   colour whatever its distance, gets the distance to the nearest of at most
-  :data:`FAR_SAMPLES` samples (a sub-lattice) instead: an upper bound. (Searching every
-  sample for every vertex took over five minutes on a 300 x 300 design; this takes 2 s, or
-  up to about 30 s for a design far from its target.);
+  :data:`FAR_SAMPLES` samples (a sub-lattice) instead: an upper bound (the times, before
+  and after: studies/results/march_memory.md);
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
   designed omega (:func:`rffqm_nlp.io.foldfile.edge_assignments`);
@@ -84,8 +83,8 @@ FAR_SAMPLES = 1024
 #: apart than the scale over this (see the module).
 SCALE_STEPS = 64
 #: Most vertex positions (slider states times pattern vertices) in one page
-#: (:func:`check_size`): 25 states of a 315 x 315 design, about a minute and 2 GB
-#: (studies/results/march_memory.md).
+#: (:func:`check_size`): 25 states of a 315 x 315 design (its time and memory:
+#: studies/results/march_memory.md).
 MAX_POINTS = 2_500_000
 #: Largest |coordinate| the page draws (distances of such points stay finite).
 MAX_COORDINATE = 1e150

@@ -137,8 +137,8 @@ _KINDS = {"obj": "an OBJ", "stl": "an STL", "ply": "a PLY", "off": "an OFF",
           "glb": "a GLB (binary glTF)", "gltf": "a glTF", "xyz": "an XYZ point"}
 _FORMAT_LIST = "an OBJ, STL, PLY, OFF, GLB, glTF or XYZ file"
 #: Most triangles of a mesh (and three vertices each) and most points of a point cloud:
-#: a larger one is refused before any work on it (docs/meshes.md, 2026-12-07: a mesh at
-#: the limit loads in 3-4 s, a 6 x 6 design from its file takes 11-12 s at 533 MB).
+#: a larger one is refused before any work on it (the time and memory at the limit:
+#: docs/meshes.md).
 MAX_FACES = 100_000
 MAX_POINTS = 50_000
 #: Largest file read (bytes), checked before reading it: a mesh of MAX_FACES triangles
@@ -755,9 +755,8 @@ def _cotangent_laplacian(mesh: trimesh.Trimesh) -> sparse.csr_matrix:
 def _solve_spd(a: sparse.spmatrix, b: np.ndarray) -> np.ndarray:
     """x with a x = b, a sparse symmetric positive definite (a Laplacian restricted to the
     free vertices, normal equations): SuperLU with a minimum degree ordering of a + a' and
-    diagonal pivots, as a Cholesky factorization would (0.09 s against 0.22 s with
-    spsolve's defaults on a 10,000 point cloud's triangulation, 0.5 against 1.3 s on a
-    300 x 300 grid); spsolve's partial pivoting where that fails."""
+    diagonal pivots, as a Cholesky factorization would (faster than spsolve's defaults:
+    docs/meshes.md); spsolve's partial pivoting where that fails."""
     a = sparse.csc_matrix(a)
     b = np.asarray(b, dtype=float)
     try:
