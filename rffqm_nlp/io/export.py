@@ -32,6 +32,8 @@ if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
 
 #: Stroke colours of the 2-D writers, as Origami Simulator expects on SVG import.
 COLORS: dict[str, str] = {"M": "#ff0000", "V": "#0000ff", "B": "#000000"}
+#: The name of each kind of edge (the legends of the pictures and the view).
+KIND_NAMES: dict[str, str] = {"M": "mountain", "V": "valley", "B": "boundary"}
 #: DXF layer and ACI colour of every kind (1 red, 5 blue, 7 white/black).
 DXF_LAYERS: dict[str, tuple[str, int]] = {"M": ("MOUNTAIN", 1), "V": ("VALLEY", 5),
                                           "B": ("BOUNDARY", 7)}

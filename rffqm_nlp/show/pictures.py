@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError
-from ..io.export import COLORS, draw_creases
+from ..io.export import COLORS, KIND_NAMES, draw_creases
 from ..files import atomic_path
 from ..io.foldfile import faces_vertices
 from ..model.marching import fold
@@ -33,7 +33,6 @@ if TYPE_CHECKING:  # matplotlib and trimesh are imported where they are used
     from ..contact.collisions import CollisionReport
     from ..targets.curvature import Curvature
 
-_KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _HISTORY_KEYS = ("iter", "objective", "inf_pr")
 #: A tiny off-screen render, run in a child process so a missing GL library cannot crash us.
 _PROBE = """
@@ -61,7 +60,7 @@ def plot_crease_pattern(pat: Pattern, omega: float, ax: Axes | None = None,
         from matplotlib.lines import Line2D
 
         present = {ln.get_color() for ln in lines}
-        handles = [Line2D([], [], color=c, label=_KIND_NAMES[k])
+        handles = [Line2D([], [], color=c, label=KIND_NAMES[k])
                    for k, c in COLORS.items() if c in present]
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
     return ax

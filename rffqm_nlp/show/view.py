@@ -60,7 +60,7 @@ from scipy.spatial import cKDTree
 
 from ..model import numpy_model
 from ..errors import InputError, RffqmError
-from ..io.export import COLORS, triangles
+from ..io.export import COLORS, KIND_NAMES, triangles
 from ..files import Key, check_value, write_text
 from ..io.foldfile import edge_assignments
 from ..model.pattern import motion_omegas
@@ -95,7 +95,6 @@ MIN_RELATIVE_EXTENT = 1e-11
 DESIGNED = "designed"
 #: Traces of :func:`figure`, in order: the folded mesh, the crease kinds, the target.
 TRACES = ("mesh", "M", "V", "B", "target")
-_KIND_NAMES = {"M": "mountain", "V": "valley", "B": "boundary"}
 _KIND_WIDTHS = {"M": 3, "V": 3, "B": 5}
 
 
@@ -365,7 +364,7 @@ def _mesh(xyz: dict, pat, intensity: list, cmax: float) -> dict:
 
 def _creases(xyz: dict) -> list[dict]:
     return [{"type": "scatter3d", "x": xyz["x"][n], "y": xyz["y"][n], "z": xyz["z"][n],
-             "mode": "lines", "name": _KIND_NAMES[k], "hoverinfo": "skip",
+             "mode": "lines", "name": KIND_NAMES[k], "hoverinfo": "skip",
              "connectgaps": False, "line": {"color": COLORS[k], "width": _KIND_WIDTHS[k]}}
             for n, k in enumerate("MVB", start=1)]
 
