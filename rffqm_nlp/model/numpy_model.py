@@ -47,16 +47,22 @@ def _vertex_args(alpha, beta, sigma) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 # --------------------------------------------------------------------------- one vertex
 
+def _multiplier(formula, name: str, alpha, beta, sigma) -> np.ndarray:
+    """``formula`` (:func:`_mu2` or :func:`_mu1`) at the checked arguments; refused where
+    it is 0 or infinite (sigma not in MV(alpha, beta))."""
+    alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
+    with np.errstate(all="ignore"):
+        value = formula(alpha, beta, sigma)
+        finite_result((value, 1 / value), f"{name} has no finite value: {_POLE}")
+    return value
+
+
 def mu2(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     """Fold angle multiplier mu_2^sigma(alpha, beta) of eq:foldAngMult, as printed; the
     arguments in :func:`rffqm_nlp.model.vertex.mu2`'s order. Raises :class:`InputError` for
     arguments that are not finite numbers broadcasting together (sigma +1 or -1) and where
     sigma is not in MV(alpha, beta) (mu2 is 0 or infinite there)."""
-    alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
-    with np.errstate(all="ignore"):
-        value = _mu2(alpha, beta, sigma)
-        finite_result((value, 1 / value), f"mu2 has no finite value: {_POLE}")
-    return value
+    return _multiplier(_mu2, "mu2", alpha, beta, sigma)
 
 
 def _mu2(alpha, beta, sigma):
@@ -74,11 +80,7 @@ def mu1(alpha: ArrayLike, beta: ArrayLike, sigma: ArrayLike) -> np.ndarray:
     ``sigma`` is the vertex sign; the result equals 1 / mu2(alpha, beta, sigma). Raises
     :class:`InputError` as :func:`mu2` does.
     """
-    alpha, beta, sigma = _vertex_args(alpha, beta, sigma)
-    with np.errstate(all="ignore"):
-        value = _mu1(alpha, beta, sigma)
-        finite_result((value, 1 / value), f"mu1 has no finite value: {_POLE}")
-    return value
+    return _multiplier(_mu1, "mu1", alpha, beta, sigma)
 
 
 def _mu1(alpha, beta, sigma):
