@@ -15,6 +15,7 @@ import pytest
 import rffqm_nlp as rq
 from rffqm_nlp import files
 from rffqm_nlp.errors import InputError, one_line
+from rffqm_nlp.files import folders
 
 OLD = {"a.txt": "old a", "only-old.txt": "old", "sub/b.txt": "old b"}
 NEW = {"a.txt": "new a", "sub/b.txt": "new b", "c.txt": "new c"}
@@ -96,7 +97,7 @@ def test_replace_folder_new_and_whole(tmp_path):
 @pytest.mark.parametrize("exchange", [True, False])
 def test_replace_folder_failure_keeps_old(tmp_path, monkeypatch, exchange):
     if not exchange:
-        monkeypatch.setattr(files, "_RENAMEAT2", None)
+        monkeypatch.setattr(folders, "RENAMEAT2", None)
     out = tmp_path / "out"
     fill(out, OLD)
     with pytest.raises(OSError, match="disk full"), files.replace_folder(out) as stage:
@@ -111,7 +112,7 @@ def test_replace_folder_failure_keeps_old(tmp_path, monkeypatch, exchange):
 def test_exchange_swaps_two_folders(tmp_path):
     fill(tmp_path / "a", OLD)
     fill(tmp_path / "b", NEW)
-    assert files._exchange(tmp_path / "a", tmp_path / "b")
+    assert folders.exchange(tmp_path / "a", tmp_path / "b")
     assert snapshot(tmp_path / "a") == NEW and snapshot(tmp_path / "b") == OLD
 
 
@@ -152,8 +153,8 @@ def _replace_killed_at(out: Path, step: int, exchange: bool) -> bool:
                 return step_then
 
             if not exchange:
-                files._RENAMEAT2 = None
-            files._exchange = counted(files._exchange)
+                folders.RENAMEAT2 = None
+            folders.exchange = counted(folders.exchange)
             for name in ("mkdir", "chmod", "rename", "unlink", "rmdir"):
                 setattr(os, name, counted(getattr(os, name)))
             write = counted(fill)
