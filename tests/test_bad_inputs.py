@@ -19,8 +19,8 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp import cli, files, memory, sweeps
-from rffqm_nlp.design import problem as design
+from rffqm_nlp import cli, design, files, memory, sweeps
+from rffqm_nlp.design.problem import DEFAULT_WEIGHTS
 from rffqm_nlp.model import lengths
 from rffqm_nlp.cli import app
 from rffqm_nlp.errors import InputError
@@ -84,7 +84,7 @@ def _not_finite() -> list[tuple[str, str, list[str]]]:
         text = design_file(design_lines=line) if table == "design" else design_file(
             solve_lines=line)
         cases.append((f"nonfinite-{table}-{key}", text, [f"[{table}] {key}", "finite number"]))
-    for i, weight in enumerate(design.DEFAULT_WEIGHTS):
+    for i, weight in enumerate(DEFAULT_WEIGHTS):
         cases.append((f"nonfinite-weight-{weight}",
                       design_file(design_lines=f"weights = {{{weight} = {values[i % 3]}}}"),
                       [f"[design] weights.{weight}"]))

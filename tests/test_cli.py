@@ -22,7 +22,7 @@ from rffqm_nlp.model import marching
 from rffqm_nlp.targets import surfaces
 from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
-from rffqm_nlp.design.problem import DesignProblem
+from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import SolverFailed
 from rffqm_nlp.design.results import DesignResult
 

@@ -26,7 +26,7 @@ from rffqm_nlp import cli, memory
 from rffqm_nlp.show import view
 from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
-from rffqm_nlp.design.problem import DesignProblem
+from rffqm_nlp.design import DesignProblem
 from rffqm_nlp.errors import InputError
 from rffqm_nlp.design.results import DesignResult
 

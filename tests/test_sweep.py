@@ -24,7 +24,7 @@ from typer.testing import CliRunner
 from rffqm_nlp import sweeps
 from rffqm_nlp.targets import surfaces
 from rffqm_nlp.cli import app
-from rffqm_nlp.design.problem import DesignProblem, SolveOptions, multistart_starts
+from rffqm_nlp.design import DesignProblem, SolveOptions, multistart_starts
 from rffqm_nlp.errors import InfeasibleDesign, InputError, SolverFailed
 from rffqm_nlp.design.results import DesignResult
 

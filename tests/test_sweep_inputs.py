@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from rffqm_nlp import sweeps
 from rffqm_nlp.cli import app
-from rffqm_nlp.design.problem import SolveOptions
+from rffqm_nlp.design import SolveOptions
 from rffqm_nlp.errors import InputError
 
 try:
