@@ -14,7 +14,7 @@ import trimesh
 from scipy.spatial import Delaunay
 
 import rffqm_nlp as rq
-from rffqm_nlp.targets import meshes
+from rffqm_nlp.targets import mesh_input, mesh_topology, meshes, parametrization
 from rffqm_nlp.errors import SurfaceError
 from rffqm_nlp.targets.meshes import MAX_DEVIATION, Mesh
 from rffqm_nlp.targets.shape import distances_to, relative_fit
@@ -74,8 +74,8 @@ def test_a_flat_rectangle_maps_onto_itself():
                np.c_[3 * side[0], np.zeros(12)], np.c_[3 * side[1], np.full(12, 1.5)],
                np.c_[np.zeros(12), 1.5 * side[2]], np.c_[np.full(12, 3.0), 1.5 * side[3]],
                [[0, 0], [3, 0], [3, 1.5], [0, 1.5]]]
-    mesh = meshes._clean(np.c_[uv, np.zeros(len(uv))], Delaunay(uv).simplices, "flat")
-    meshes._check_disk(mesh, "flat")
+    mesh = mesh_input.clean(np.c_[uv, np.zeros(len(uv))], Delaunay(uv).simplices, "flat")
+    mesh_topology.check_disk(mesh, "flat")
     mapped = meshes.conformal_rectangle(mesh)
     assert mapped is not None
     assert sorted(np.ptp(mapped, axis=0)) == pytest.approx([1.5, 3.0], rel=1e-9)
@@ -150,13 +150,13 @@ def test_a_disk_without_corners_uses_lscm():
 
 def test_tutte_fallback_is_injective_with_the_boundary_on_a_circle():
     surface = rq.surfaces.get("torus_patch", domain=((-1.2, 1.2), (0.0, 3.1)))
-    mesh = meshes._clean(surface.mesh(31, 31).vertices, surface.mesh(31, 31).faces, "torus")
-    meshes._check_disk(mesh, "torus")
-    uv = meshes._tutte(mesh)
-    loop = meshes._boundary_loop(mesh)
+    mesh = mesh_input.clean(surface.mesh(31, 31).vertices, surface.mesh(31, 31).faces, "torus")
+    mesh_topology.check_disk(mesh, "torus")
+    uv = parametrization.tutte(mesh)
+    loop = mesh_topology.boundary_loop(mesh)
     assert np.allclose(np.linalg.norm(uv[loop], axis=1), 1.0)
-    assert (meshes._signed_areas(mesh.faces, uv) > 0).all()
-    assert meshes._injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool))
+    assert (parametrization.signed_areas(mesh.faces, uv) > 0).all()
+    assert parametrization.injective(mesh, uv, np.zeros(len(mesh.faces), dtype=bool))
 
 
 def test_sphere_cap_curvature_from_the_spline():

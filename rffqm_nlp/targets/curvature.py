@@ -20,7 +20,7 @@ import numpy as np
 from . import shape
 from ..model.backend import finite_array, finite_result
 from ..errors import InputError
-from .surfaces import Surface, check_surface
+from .parametric import Surface, check_surface
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ from scipy.spatial.distance import directed_hausdorff
 from ..model.backend import finite_array, finite_result, is_casadi, math_for
 from ..errors import InputError
 from ..files import Key, check_value, describe_value
-from .surfaces import Surface, check_surface, point_set_diameter
+from .parametric import Surface, check_surface
+from .point_sets import point_set_diameter
 
 Lattice = Any  # (n, m, 3) ndarray or a sequence of three (n, m) matrices
 Forms = tuple[Any, Any, Any, Any, Any, Any]
