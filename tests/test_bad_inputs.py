@@ -22,7 +22,7 @@ import rffqm_nlp as rq
 from rffqm_nlp import cli, design, files, memory, sweeps
 from rffqm_nlp.design.problem import DEFAULT_WEIGHTS
 from rffqm_nlp.model import lengths
-from rffqm_nlp.cli import app
+from rffqm_nlp.cli import app, forward_commands, result_files
 from rffqm_nlp.errors import InputError
 
 try:
@@ -355,7 +355,7 @@ def test_the_march_command_refuses_a_pattern_it_cannot_hold(tmp_path, monkeypatc
     line with the estimate, no output folder, before any march."""
     def boundary(*args, **kwargs):
         raise AssertionError("the boundary was built")
-    monkeypatch.setattr(cli, "miura_boundary", boundary)
+    monkeypatch.setattr(forward_commands, "miura_boundary", boundary)
     out = tmp_path / "march"
     res = runner.invoke(app, ["march", "--rows", "100000", "--cols", "100000", "--frames",
                               str(frames), "--out", str(out)])
@@ -557,8 +557,6 @@ def test_a_study_runs_code_only_with_trust(tmp_path):
 
 
 def test_render_rebuilds_a_code_target_only_with_trust(tmp_path, monkeypatch):
-    from rffqm_nlp import cli
-
     (tmp_path / "shapes.py").write_text(SHAPES)
     result = SimpleNamespace(
         problem={"target": {"python": f"{tmp_path / 'shapes.py'}:dome",
@@ -566,8 +564,8 @@ def test_render_rebuilds_a_code_target_only_with_trust(tmp_path, monkeypatch):
         target_points=np.zeros((3, 3, 3)), rotation=np.eye(3), translation=np.zeros(3),
         target_grid=None)
     warnings: list[str] = []
-    monkeypatch.setattr(cli, "warn", warnings.append)
-    points = cli._target_for_render(result)
+    monkeypatch.setattr(result_files, "warn", warnings.append)
+    points = result_files.target_for_render(result)
     assert np.shape(points) == (9, 3) and "pass --trust" in warnings[0]
-    mesh = cli._target_for_render(result, trust=True)
+    mesh = result_files.target_for_render(result, trust=True)
     assert len(mesh.faces) > 0 and len(warnings) == 1

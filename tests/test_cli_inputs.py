@@ -23,6 +23,7 @@ from typer.testing import CliRunner
 from view_results import miura_result
 
 from rffqm_nlp import cli, memory
+from rffqm_nlp.cli import forward_commands, output
 from rffqm_nlp.show import view
 from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
@@ -45,7 +46,7 @@ NASTY = "a\x1b[31mred\x1b[2J\x9b1m\x1b]0;title\x07"
 def plain_console(monkeypatch):
     """The commands' stderr console without colours, so any control character on stderr
     comes from what they print, not from rich's styling."""
-    monkeypatch.setattr(cli, "console", Console(stderr=True, force_terminal=False,
+    monkeypatch.setattr(output, "console", Console(stderr=True, force_terminal=False,
                                                 color_system=None))
 
 
@@ -86,7 +87,7 @@ def no_work(monkeypatch):
     def never(*args, **kwargs):
         raise AssertionError("work started before the refusal")
 
-    monkeypatch.setattr(cli, "miura_boundary", never)
+    monkeypatch.setattr(forward_commands, "miura_boundary", never)
     monkeypatch.setattr(DesignResult, "load", never)
     monkeypatch.setattr(view, "spec", never)
     monkeypatch.setattr(viz, "folding_gif", never)
@@ -289,9 +290,9 @@ def test_written_paths_and_tables_escape_control_characters(saved, tmp_path, mon
 
 
 def test_warnings_go_through_safe_text(monkeypatch, capsys):
-    monkeypatch.setattr(cli, "console", Console(stderr=True, force_terminal=False,
+    monkeypatch.setattr(output, "console", Console(stderr=True, force_terminal=False,
                                                 color_system=None, width=10_000))
-    cli.warn("render skipped: " + NASTY + "\nsecond line [bold]x[/bold]")
+    output.warn("render skipped: " + NASTY + "\nsecond line [bold]x[/bold]")
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and not CONTROL.search(err.rstrip("\n")), repr(err)
     assert "\\x1b[31mred" in err and "[bold]x[/bold]" in err
