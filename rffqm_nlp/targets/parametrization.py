@@ -180,6 +180,8 @@ def _area_spread(mesh: trimesh.Trimesh, uv: np.ndarray) -> float:
 
 
 def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Signed areas (m,) of the triangles ``faces`` (m, 3) in the plane of uv (n, 2):
+    positive where a triangle runs counter-clockwise."""
     a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
                   - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))

@@ -6,7 +6,7 @@ differentiation). Built-ins (:func:`names`, :func:`get`; :mod:`.builtins`) valid
 parameters and domain on construction, users add their own with :class:`Custom`
 (:mod:`.custom`), and a design file's ``[target]`` table names one of either
 (:func:`from_config`, :meth:`Surface.to_config`; a design file is read by
-:func:`rffqm_nlp.design.problem.load_design`), with the user's code run only behind
+:func:`rffqm_nlp.design.load_design`), with the user's code run only behind
 ``--trust`` (:mod:`.user_code`). A designer's mesh or point cloud becomes a surface with
 :class:`Mesh` (:mod:`.meshes`).
 
