@@ -1,11 +1,12 @@
-"""What the studies share: the bundled target problems, one design solved in a child process
-(its time and peak memory its own), an earlier revision's package, the machine/date line of
-the tables, the table cell formatter, writing and printing a table, and the ``--smoke`` run
-(tiny sizes, output to a temporary folder).
+"""What the benchmarks share: the bundled target problems, one design solved in a child
+process (its time and peak memory its own), an earlier revision's package, the machine/date
+line of the tables, Markdown tables and their cells, the page a full run writes to
+(docs/benchmarks/<name>.md) and the ``--smoke`` run (tiny sizes, output to a temporary
+folder).
 
-A study imports it as ``from common import ...`` (the studies folder is the script's path).
-``python studies/common.py --child '<json>'`` solves one design and prints its row as JSON
-(:func:`solve_in_child` runs it).
+A benchmark imports it as ``from common import ...`` (the benchmarks folder is the script's
+path). ``python benchmarks/common.py --child '<json>'`` solves one design and prints its row
+as JSON (:func:`solve_in_child` runs it).
 """
 
 from __future__ import annotations
@@ -26,17 +27,20 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from rffqm_nlp.design.problem import DesignProblem, SolveOptions, load_design
-from rffqm_nlp.errors import RffqmError, SolverFailed
-from rffqm_nlp.design.results import SolveStats
+from rffqm_nlp import (DesignProblem, RffqmError, SolveOptions, SolverFailed, SolveStats,
+                       load_design)
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "studies" / "results"
+#: the pages a full run writes its table to, docs/benchmarks/<name>.md
+PAGES = ROOT / "docs" / "benchmarks"
 #: the bundled target files, targets/<name>.toml
 TARGETS = ("sphere_cap", "hyperboloid", "quarter_vase")
-#: "to 0.9%": the ``stop_rms`` (RMS distance / diameter) a study passes when it solves to that
-#: fit; it was the bundled target files' own value until 2026-12-01
+#: "to 0.9%": the ``stop_rms`` (RMS distance / diameter) a benchmark passes when it solves to
+#: that fit; it was the bundled target files' own value until 2026-12-01
 STOP_RMS = 0.009
+#: the lines between which a full run writes its table into its page; the rest of the page
+#: (its question, earlier runs) is kept
+BEGIN, END = "<!-- latest run -->", "<!-- end of the latest run -->"
 
 
 # ------------------------------------------------------------------ problems
@@ -131,10 +135,22 @@ def solve_in_child(target: str, n: int, design: dict | None = None, solve: dict 
     return run_child(__file__, "--child", args, env=env)
 
 
-# ------------------------------------------------------------------ tables
+# ------------------------------------------------------------------ tables and pages
+def machine() -> str:
+    """The machine: architecture, CPUs and their model, memory, operating system, versions."""
+    model = next((line.split(":", 1)[1].strip() for line in
+                  Path("/proc/cpuinfo").read_text().splitlines()
+                  if line.startswith("model name")), "?") if Path("/proc/cpuinfo").exists() \
+        else "?"
+    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    return (f"{platform.machine()}, {os.cpu_count()} CPUs ({model}), {memory:.0f} GB; "
+            f"{platform.platform()}; Python {platform.python_version()}, NumPy "
+            f"{np.__version__}, CasADi {ca.__version__}")
+
+
 @dataclass
 class Run:
-    """A study run's clock and load, for the machine/date line of its table."""
+    """A benchmark run's clock and load, for the date/machine line of its table."""
 
     t0: float = field(default_factory=time.perf_counter)
     load0: float = field(default_factory=lambda: os.getloadavg()[0])
@@ -143,19 +159,16 @@ class Run:
         return time.perf_counter() - self.t0
 
     def header(self) -> str:
-        """date; machine; versions; load at start and now; seconds since the start."""
-        return (f"date {time.strftime('%Y-%m-%dT%H:%M')}; {platform.machine()}, "
-                f"{os.cpu_count()} CPUs; Python {platform.python_version()}, NumPy "
-                f"{np.__version__}, CasADi {ca.__version__}; load average (1 min) "
+        """date; machine; load at start and now; seconds since the start."""
+        return (f"date {time.strftime('%Y-%m-%dT%H:%M')}; {machine()}; load average (1 min) "
                 f"{self.load0:.1f} at start, {os.getloadavg()[0]:.1f} at end; whole run "
                 f"{self.elapsed():.0f} s")
 
-
-def write_table(path: Path, text: str) -> None:
-    """Write a study's Markdown ``text`` to ``path`` (its folder made if missing) and print it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
-    print(text)
+    def preamble(self, script: str) -> list[str]:
+        """The lines a table starts with: :meth:`header` and the command that made it."""
+        return [f"- {self.header()}",
+                "- command: `" + " ".join([f"python benchmarks/{script}", *sys.argv[1:]])
+                + "`"]
 
 
 def fmt(value: float | None, spec: str = ".3g", none: str = "-") -> str:
@@ -163,22 +176,57 @@ def fmt(value: float | None, spec: str = ".3g", none: str = "-") -> str:
     return none if value is None else format(value, spec)
 
 
-# ------------------------------------------------------------------ smoke runs
-def add_smoke(parser: argparse.ArgumentParser) -> None:
-    """The ``--smoke`` flag: tiny sizes, one repetition, output to a temporary folder."""
+def ratio(value: float | None, baseline: float | None, spec: str = ".2f") -> str:
+    """A table cell: ``value / baseline`` (``-`` without either)."""
+    return "-" if value is None or not baseline else format(value / baseline, spec)
+
+
+def markdown_table(columns: list[str] | tuple[str, ...], rows: list[list[str]]) -> list[str]:
+    """The lines of a Markdown table: the header, its separator, one line per row."""
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns),
+            *("| " + " | ".join(row) + " |" for row in rows)]
+
+
+def write_page(path: Path, title: str, text: str) -> None:
+    """Print ``text`` (a run's table and notes) and write it into the page ``path``: between
+    :data:`BEGIN` and :data:`END` where the page has them (the rest of the page kept), else
+    as a new page with ``title``."""
+    print(text)
+    block = f"{BEGIN}\n{text.strip()}\n{END}"
+    page = path.read_text() if path.exists() else ""
+    if BEGIN in page and END in page:
+        head, rest = page.split(BEGIN, 1)
+        page = head + block + rest.split(END, 1)[1]
+    else:
+        page = f"# {title}\n\n{block}\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(page)
+    print(f"wrote {path}")
+
+
+# ------------------------------------------------------------------ output and smoke runs
+def add_output(parser: argparse.ArgumentParser, name: str) -> None:
+    """The ``--out`` option (default docs/benchmarks/<name>.md) and the ``--smoke`` flag."""
+    parser.add_argument("--out", type=Path, default=PAGES / f"{name}.md",
+                        help="the page the table goes to (default: %(default)s)")
     parser.add_argument("--smoke", action="store_true",
-                        help="a quick check that the study runs: smallest sizes, one "
-                             "repetition, output to a temporary folder (studies/results "
-                             "is left alone)")
+                        help="a quick check that the benchmark runs: smallest sizes, one "
+                             "repetition, output to a temporary folder (docs/benchmarks is "
+                             "left alone)")
 
 
-def smoke_dir(study: str) -> Path:
+def smoke_dir(name: str) -> Path:
     """A fresh temporary folder for a smoke run's output."""
-    return Path(tempfile.mkdtemp(prefix=f"rffqm-smoke-{study}-"))
+    return Path(tempfile.mkdtemp(prefix=f"rffqm-smoke-{name}-"))
+
+
+def output(args: argparse.Namespace, name: str) -> Path:
+    """The page a run writes: ``args.out``, or a temporary one for a smoke run."""
+    return smoke_dir(name) / f"{name}.md" if args.smoke else args.out
 
 
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
         print(json.dumps(solve_design(**json.loads(sys.argv[2]))))
     else:
-        sys.exit("usage: python studies/common.py --child '<json>' (see solve_in_child)")
+        sys.exit("usage: python benchmarks/common.py --child '<json>' (see solve_in_child)")

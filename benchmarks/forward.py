@@ -1,4 +1,5 @@
-"""Benchmark of the forward model: CasADi graph vs NumPy model vs per-panel Python loop.
+"""Forward speed: the march and the fold, CasADi graph and NumPy model, against the per-panel
+Python loop.
 
 For N x N panels (default 10, 100, 300, 1000) it times, in one run,
 
@@ -18,11 +19,13 @@ one fold) exceeds ``--budget`` seconds are skipped and reported with the estimat
 slower than 5 s are timed once. The K-omega fold runs in chunks of at most ~1e7 vertices
 per chunk to bound memory. Times are CPU seconds of this (single-threaded) process by
 default, so other jobs on a shared machine do not inflate them; ``--clock wall`` for
-wall-clock time (both are logged). Results are printed and written as Markdown.
+wall-clock time (both are logged). The table is printed and written into
+docs/benchmarks/forward.md.
 
-Usage: ``python studies/bench_forward.py [--sizes 10,100] [--repeat 3] [--omegas 100]
-[--clock cpu|wall] [--budget 60] [--out studies/results/bench_forward.md]``;
-``--smoke``: 4 x 4 panels, one call per timing, 4 omegas, output to a temporary folder.
+    python benchmarks/forward.py [--sizes 10,100] [--repeat 3] [--omegas 100]
+        [--clock cpu|wall] [--budget 60] [--out docs/benchmarks/forward.md]
+    python benchmarks/forward.py --smoke   (4 x 4 panels, one call per timing, 4 omegas,
+        temporary output)
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ from __future__ import annotations
 import argparse
 import gc
 import math
-import platform
 import sys
 import time
 from dataclasses import dataclass
@@ -42,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import rffqm_nlp as rq  # noqa: E402
-from common import Run, add_smoke, smoke_dir  # noqa: E402
+from common import Run, add_output, markdown_table, output, write_page  # noqa: E402
 from rffqm_nlp.model import marching as mg  # noqa: E402
 from rffqm_nlp.model import numpy_model as nm  # noqa: E402
 from tests.forward_oracle import fold_loop, march_loop  # noqa: E402
@@ -338,31 +340,11 @@ class Bench:
         return out
 
     def markdown(self, sizes, meta: list[str]) -> str:
+        """The run's notes, its table and the goals."""
         header, rows = self.rows(sizes)
-        lines = ["# Forward-model benchmark", "", *meta, "",
-                 "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        lines += ["| " + " | ".join(r) + " |" for r in rows]
-        lines += ["", "## Goals", ""] + [f"- {g}" for g in self.goals(sizes)]
+        lines = [*meta, "", *markdown_table(header, rows), "", "Goals:", ""]
+        lines += [f"- {g}" for g in self.goals(sizes)]
         return "\n".join(lines) + "\n"
-
-    def print_table(self, sizes) -> None:
-        header, rows = self.rows(sizes)
-        try:
-            from rich.console import Console
-            from rich.table import Table
-        except ImportError:
-            print(" | ".join(header))
-            for r in rows:
-                print(" | ".join(r))
-        else:
-            table = Table(title=f"Forward-model benchmark ({CLOCK} time, seconds)")
-            for h in header:
-                table.add_column(h, justify="left" if h in ("panels", "operation") else "right")
-            for k, r in enumerate(rows):
-                table.add_row(*r, end_section=(k % len(self.OPS) == len(self.OPS) - 1))
-            Console(width=200).print(table)
-        for g in self.goals(sizes):
-            print(g)
 
 
 def main(argv=None) -> None:
@@ -377,13 +359,10 @@ def main(argv=None) -> None:
                         help="skip CasADi/NumPy cells estimated to take longer (seconds)")
     parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
                         help="process CPU time (default; robust on a shared machine) or wall")
-    parser.add_argument("--out", default=str(ROOT / "studies/results/bench_forward.md"),
-                        help="Markdown output ('' to skip)")
-    add_smoke(parser)
+    add_output(parser, "forward")
     args = parser.parse_args(argv)
     if args.smoke:
         args.sizes, args.repeat, args.omegas = "4", 1, 4
-        args.out = str(smoke_dir("bench_forward") / "bench_forward.md")
     sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
     global CLOCK
     CLOCK = args.clock
@@ -391,9 +370,8 @@ def main(argv=None) -> None:
     run = Run()
     for n in sizes:
         bench.run_size(n)
-    total = run.elapsed()
     meta = [
-        f"- {run.header()}; {platform.platform()}",
+        *run.preamble("forward.py"),
         "- input: Miura-ori (alpha0 = 1.2, a = b = 1, Miura lengths), boundary angles perturbed "
         "(seed 0) by " + ", ".join(f"{bench.amplitude[n]:g}*pi at {n}x{n}" for n in sizes)
         + " (the largest of 1e-3*pi, 5e-4*pi, ... that marches)",
@@ -410,16 +388,7 @@ def main(argv=None) -> None:
         "- max rel. diff: max |X or Y - NumPy model| / max |X| over the march, fold and first/"
         "last omega of the K-omega fold",
     ]
-    print()
-    bench.print_table(sizes)
-    print(f"whole run: {total:.0f} s")
-    text = bench.markdown(sizes, meta)
-    print(text)
-    if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text)
-        print(f"wrote {out}")
+    write_page(output(args, "forward"), "Forward speed", bench.markdown(sizes, meta))
 
 
 if __name__ == "__main__":

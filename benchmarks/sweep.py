@@ -1,5 +1,5 @@
-"""Throughput of a 32-design sweep: serially in one process against a LocalCluster of 2
-single-threaded worker processes, in the same run.
+"""Sweep: the throughput of a 32-design sweep on a LocalCluster of 2 single-threaded worker
+processes, against the same sweep run serially in one process in the same run.
 
 The study: sphere caps of 8 radii (a patch of side 3.2, |u|, |v| <= 1.6 / R) x both Miura
 layouts x 6 x 6 and 8 x 8 panels, default options, IPOPT to its tolerance (stop_rms off).
@@ -7,11 +7,11 @@ Both runs start from an empty output folder (runs/bench_sweep/serial and .../clu
 cluster's wall time includes starting it. Each run also reports the CPU cores it used
 (its own processes' CPU time, workers included, over its wall time) and the cores the whole
 machine was busy (from /proc/stat), so that other jobs on the machine show. Prints a table
-of designs per minute and the ratio, checks that both runs give the same table, and writes
-studies/results/bench_sweep.md.
+of designs per minute and their ratio to the serial run's, checks that both runs give the
+same table, and writes docs/benchmarks/sweep.md.
 
-    python studies/bench_sweep.py [--workers 2]
-    python studies/bench_sweep.py --smoke   (one design at 4 x 4 panels, 1 worker, temporary
+    python benchmarks/sweep.py [--workers 2] [--out docs/benchmarks/sweep.md]
+    python benchmarks/sweep.py --smoke   (one design at 4 x 4 panels, 1 worker, temporary
         output)
 """
 
@@ -24,8 +24,10 @@ import shutil
 import time
 from pathlib import Path
 
-from common import RESULTS, ROOT, Run, add_smoke, smoke_dir, write_table
-from rffqm_nlp import sweeps
+import rffqm_nlp as rq
+from common import ROOT, Run, add_output, markdown_table, output, smoke_dir, write_page
+
+sweeps = rq.sweeps
 
 RADII = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)
 HALF_SIDE = 1.6
@@ -69,17 +71,19 @@ def timed(the_study: sweeps.Study, scheduler: str, workers: int, out: Path) -> d
             "machine": (machine_busy() - busy0) / wall, "frame": frame}
 
 
+COLUMNS = ("run", "wall time (s)", "designs/min", "/ serial", "mean per-design time (s)",
+           "cores used", "designs/min per core used", "machine busy (cores)", "statuses")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--results", type=Path, default=RESULTS)
-    add_smoke(parser)
+    add_output(parser, "sweep")
     args = parser.parse_args()
-    the_study, runs = study(), ROOT / "runs" / "bench_sweep"
+    the_study, runs = study(), ROOT / "runs" / "benchmarks" / "sweep"
     if args.smoke:
         the_study = study(radii=RADII[:1], layouts=("zigzag_i",), panels=(4,))
-        args.workers, runs = 1, smoke_dir("bench_sweep")
-        args.results = runs / "results"
+        args.workers, runs = 1, smoke_dir("sweep")
     n = len(the_study.designs())
     run = Run()
     serial = timed(the_study, "none", 1, runs / "serial")
@@ -89,11 +93,16 @@ def main() -> None:
     both = (a["status"] == "solved") & (b["status"] == "solved")
     rel = (a["rms"][both] - b["rms"][both]).abs() / a["rms"][both]
     same_iterations = int((a["iterations"][both] == b["iterations"][both]).sum())
-    rate_s, rate_c = 60 * n / serial["wall"], 60 * n / cluster["wall"]
-    rows = [("serial (scheduler none, this process)", serial, rate_s),
-            (f"LocalCluster, {args.workers} workers x 1 thread", cluster, rate_c)]
-    lines = ["# Sweep throughput (`studies/bench_sweep.py`)", "",
-             f"- {run.header()} (the load includes this run's own processes)",
+    rate_s = 60 * n / serial["wall"]
+    cells = []
+    for label, r in (("serial (scheduler none, this process)", serial),
+                     (f"LocalCluster, {args.workers} workers x 1 thread", cluster)):
+        frame, rate = r["frame"], 60 * n / r["wall"]
+        statuses = ", ".join(f"{k} {v}" for k, v in frame["status"].value_counts().items())
+        cells.append([label, f"{r['wall']:.1f}", f"{rate:.1f}", f"{rate / rate_s:.2f}",
+                      f"{frame['time'].mean():.2f}", f"{r['own']:.2f}",
+                      f"{rate / r['own']:.1f}", f"{r['machine']:.2f}", statuses])
+    lines = [*run.preamble("sweep.py"),
              f"- study: {n} designs, sphere caps (patch side {2 * HALF_SIDE:g}): "
              f"{', '.join(sorted({d.case for d in the_study.designs()}))} x "
              "layouts x pattern sizes as in `study()`; IPOPT (sequential), stop_rms off, "
@@ -102,25 +111,14 @@ def main() -> None:
              "- wall time includes starting the cluster and its workers importing rffqm_nlp; "
              "per-design time = the design's own wall time where it ran (build + solve)",
              "- cores used: CPU seconds of the run's own processes (workers included) / wall "
-             "time; machine busy: all processes, from /proc/stat; the difference is other jobs",
-             "",
-             "| run | wall time (s) | designs/min | mean per-design time (s) | cores used "
-             "| designs/min per core used | machine busy (cores) | statuses |",
-             "|---|---|---|---|---|---|---|---|"]
-    for label, r, rate in rows:
-        frame = r["frame"]
-        statuses = ", ".join(f"{k} {v}" for k, v in frame["status"].value_counts().items())
-        lines.append(f"| {label} | {r['wall']:.1f} | {rate:.1f} | {frame['time'].mean():.2f} "
-                     f"| {r['own']:.2f} | {rate / r['own']:.1f} | {r['machine']:.2f} "
-                     f"| {statuses} |")
-    lines += ["", f"Throughput ratio cluster / serial: **{rate_c / rate_s:.2f}x** "
-              f"(ideal {args.workers}x on {args.workers} free cores); per core used "
-              f"{(rate_c / cluster['own']) / (rate_s / serial['own']):.2f}.", "",
-              f"Same table: ids and statuses {'identical' if same else 'DIFFER'}; "
-              f"{same_iterations} of {int(both.sum())} designs solved by both took the same "
-              f"iterations; largest relative RMS difference {rel.max():.1e}."]
-    text = "\n".join(lines) + "\n"
-    write_table(args.results / "bench_sweep.md", text)
+             "time; machine busy: all processes, from /proc/stat, the load of this run "
+             f"included; the difference is other jobs; ideal / serial: {args.workers} on "
+             f"{args.workers} free cores", "",
+             *markdown_table(COLUMNS, cells), "",
+             f"Same table: ids and statuses {'identical' if same else 'DIFFER'}; "
+             f"{same_iterations} of {int(both.sum())} designs solved by both took the same "
+             f"iterations; largest relative RMS difference {rel.max():.1e}."]
+    write_page(output(args, "sweep"), "Sweep", "\n".join(lines))
 
 
 if __name__ == "__main__":
