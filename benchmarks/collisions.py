@@ -11,7 +11,7 @@ times in one run
 
 and reports their ratio (the issue's goal: at most 2 at 100 x 100), and
 * ``one fit``  the same check with one affine fit of the whole pattern's displacements in
-  the broad phase (the path below ``collisions.MIN_TILES`` tiles), against the tiles' fits
+  the broad phase (the path below ``contact.broad.MIN_TILES`` tiles), against the tiles' fits
   it uses from that many tiles on (docs/collisions.md); "same" says whether both gave the
   same report.
 
@@ -52,8 +52,8 @@ from common import STOP_RMS, Run, add_output, markdown_table, output, target_pro
 from rffqm_nlp import MarchingError, collisions
 from rffqm_nlp.model.numpy_model import fold, march
 
-#: the module (the package's ``collisions`` is the function)
-contact = importlib.import_module("rffqm_nlp.contact.collisions")
+#: the broad phase, whose tile constants (TILE, MIN_TILES) the "one fit" rows change
+broad = importlib.import_module("rffqm_nlp.contact.broad")
 COLUMNS = ("panels", "pattern", "omega*", "march+fold [s]", "collisions [s]", "ratio",
            "one fit [s]", "one fit / tiles", "same", "check peak [MB]", "free", "first_omega")
 
@@ -94,12 +94,12 @@ def peak_mb(f) -> str:
 @contextmanager
 def one_fit():
     """The broad phase with one affine fit for the whole pattern, however many tiles."""
-    saved = contact.MIN_TILES
-    contact.MIN_TILES = math.inf
+    saved = broad.MIN_TILES
+    broad.MIN_TILES = math.inf
     try:
         yield
     finally:
-        contact.MIN_TILES = saved
+        broad.MIN_TILES = saved
 
 
 def first(rep) -> str:
@@ -183,8 +183,8 @@ def main() -> None:
         "100))`, the baseline; collisions: `collisions(pattern, omega*)` (clearance 0, tol "
         "1e-4); ratio: collisions / march+fold; check peak: the tracemalloc peak of one more "
         "collisions call; one fit: the check with one affine fit of the displacements in the "
-        f"broad phase instead of one per {contact.TILE} x {contact.TILE}-panel tile (used "
-        f"from {contact.MIN_TILES} tiles on), same: the same report. Goal (issue 20): ratio "
+        f"broad phase instead of one per {broad.TILE} x {broad.TILE}-panel tile (used "
+        f"from {broad.MIN_TILES} tiles on), same: the same report. Goal (issue 20): ratio "
         "<= 2 at 100 x 100", "", *table(rows)])
     write_page(output(args, "collisions"), "Collisions", text)
 

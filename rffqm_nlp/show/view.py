@@ -16,7 +16,7 @@ The page shows, in the target's frame (every state moved by the design's rigid m
   (:func:`scale_stride`). A vertex of another state beyond the scale, drawn in its top
   colour whatever its distance, gets the distance to the nearest of at most
   :data:`FAR_SAMPLES` samples (a sub-lattice) instead: an upper bound (the times, before
-  and after: studies/results/march_memory.md);
+  and after: docs/benchmarks/march_memory.md);
 * the creases as three Scatter3d line traces, mountain red, valley blue, boundary black
   (the colours of the SVG export), their kinds taken from the fold angle signs at the
   designed omega (:func:`rffqm_nlp.io.foldfile.edge_assignments`);
@@ -84,7 +84,7 @@ FAR_SAMPLES = 1024
 SCALE_STEPS = 64
 #: Most vertex positions (slider states times pattern vertices) in one page
 #: (:func:`check_size`): 25 states of a 315 x 315 design (its time and memory:
-#: studies/results/march_memory.md).
+#: docs/benchmarks/march_memory.md).
 MAX_POINTS = 2_500_000
 #: Largest |coordinate| the page draws (distances of such points stay finite).
 MAX_COORDINATE = 1e150
@@ -214,7 +214,7 @@ def _tree(points: np.ndarray) -> cKDTree:
     """A k-d tree of the points (k, 3) for nearest-point queries from afar. Sliding
     midpoint splits into uncompacted nodes, 64 points a leaf: the same answers as
     cKDTree's defaults, 15 to 40 times faster for points away from a surface's samples
-    (studies/results/march_memory.md)."""
+    (docs/benchmarks/march_memory.md)."""
     return cKDTree(points, leafsize=64, balanced_tree=False, compact_nodes=False)
 
 
