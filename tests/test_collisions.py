@@ -14,16 +14,18 @@ from scipy.optimize import minimize
 
 import rffqm_nlp as rq
 from rffqm_nlp.model import numpy_model as nm
-from rffqm_nlp.contact.collisions import (CollisionReport, _coarse_rows, _distance, _Geometry,
-                                  _lower_bound, _motion, _States, collisions, panel_distance,
-                                  triangle_distance, triangles_intersect)
+from rffqm_nlp.contact import broad, motion
+from rffqm_nlp.contact.collisions import (CollisionReport, collisions, near_pairs,
+                                          panel_distance, triangle_distance,
+                                          triangles_intersect)
+from rffqm_nlp.contact.motion import motion_bound
+from rffqm_nlp.contact.narrow import distance, lower_bound
+from rffqm_nlp.contact.panels import Geometry, States
 from rffqm_nlp.errors import InputError
 from rffqm_nlp.model.lengths import side_length_lp
 
-collisions_module = importlib.import_module("rffqm_nlp.contact.collisions")
 
-
-def non_adjacent(geo: _Geometry, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+def non_adjacent(geo: Geometry, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Mask of the panel pairs p, q (n,) that share no vertex (row or column apart by 2 or
     more)."""
     i, j = geo.ij[:, 0], geo.ij[:, 1]
@@ -51,7 +53,7 @@ def reference_distance(A: np.ndarray, B: np.ndarray) -> float:
 
 def all_pair_distances(pat: rq.Pattern, omega: float) -> dict:
     """Every pair of panels sharing no vertex -> their distance (O(n^2) reference)."""
-    geo = _Geometry(pat)
+    geo = Geometry(pat)
     P = pat.N * pat.M
     p, q = np.triu_indices(P, 1)
     keep = non_adjacent(geo, p, q)
@@ -222,7 +224,7 @@ def test_flat_overlaps_match_clipped_areas(seed):
     X[..., :2] += rng.normal(0, 0.03, X[..., :2].shape)
     fake = rq.Pattern(alpha=pat.alpha, beta=pat.beta, sigma=pat.sigma, lh=pat.lh,
                       lv=pat.lv, mu=pat.mu, X=X)
-    geo = _Geometry(fake)
+    geo = Geometry(fake)
     quads = []
     for r in X.reshape(-1, 3)[geo.corners[:, [0, 2, 3, 1]], :2]:     # (4, 2) each
         turns = [cross2(r[(k + 1) % 4] - r[k], r[(k + 2) % 4] - r[(k + 1) % 4]) for k in range(4)]
@@ -283,15 +285,15 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     states is at least the change of the exact distance and at most the largest relative
     displacement over the 16 vertex pairs (brute force)."""
     pat = random_recipe(22)
-    geo = _Geometry(pat)
-    states = _States(geo, 1.0, np.linspace(0.0, 2.5, 11))
+    geo = Geometry(pat)
+    states = States(geo, 1.0, np.linspace(0.0, 2.5, 11))
     p, q = np.triu_indices(pat.N * pat.M, 1)
     keep = non_adjacent(geo, p, q)
     p, q = p[keep], q[keep]
     tight = 0
     for k in range(11):
         s = np.full(len(p), k)
-        lb, d = _lower_bound(states, s, p, q), _distance(states, s, p, q)
+        lb, d = lower_bound(states, s, p, q), distance(states, s, p, q)
         assert np.all(lb <= d + 1e-12)
         tight += np.sum(lb > 0.5 * d)
     assert tight > 0.5 * 11 * len(p)              # and it is not a trivial bound
@@ -300,16 +302,16 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     dP = Q[4, p] - Q[3, p]
     dQ = Q[4, q] - Q[3, q]
     brute = np.linalg.norm(dQ[:, None, :, :] - dP[:, :, None, :], axis=3).max(axis=(1, 2))
-    m = _motion(states, a, b, p, q)
-    change = np.abs(_distance(states, b, p, q) - _distance(states, a, p, q))
+    m = motion_bound(states, a, b, p, q)
+    change = np.abs(distance(states, b, p, q) - distance(states, a, p, q))
     assert np.all(change <= m + 1e-12) and np.all(m <= brute * (1 + 1e-12))
     assert np.mean(m < 0.5 * brute) > 0.1          # the panel frames do better for some
 
 
-def coarse_rows(geo: _Geometry, states: _States, K: int, clearance: float):
+def coarse_rows(geo: Geometry, states: States, K: int, clearance: float):
     """The broad phase's rows (n, 4) and bounds (n,) of every step between the first K
     states, its chunks put together."""
-    chunks = [c for a in range(K - 1) for c in _coarse_rows(geo, states, a, clearance)]
+    chunks = [c for a in range(K - 1) for c in broad.coarse_rows(geo, states, a, clearance)]
     return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 
@@ -326,13 +328,13 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(make, seed, cleara
     gaps and motion bound over a coarse step, however far apart, with a motion bound at
     least as large, and each pair once a step."""
     pat = {"random": random_recipe, "miura": perturbed_miura}[make](seed)
-    geo = _Geometry(pat)
+    geo = Geometry(pat)
     K = 25
-    states = _States(geo, 1.0, np.linspace(0.0, 2.4, K))
+    states = States(geo, 1.0, np.linspace(0.0, 2.4, K))
     if rows_at_once:
-        monkeypatch.setattr(collisions_module, "ROWS", rows_at_once)
+        monkeypatch.setattr(broad, "ROWS", rows_at_once)
         chunks = [len(r) for a in range(K - 1)
-                  for r, _ in collisions_module._coarse_rows(geo, states, a, clearance)]
+                  for r, _ in broad.coarse_rows(geo, states, a, clearance)]
         assert len(chunks) > 2 * (K - 1) and max(chunks) <= rows_at_once
     rows, m = coarse_rows(geo, states, K, clearance)
     got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
@@ -370,7 +372,7 @@ def test_reaches_bound_every_pair_the_spheres_do_not_clear(seed, strain, noise, 
     D = strain * rng.normal(0, 1, (3, 3)) @ C + rng.normal(0, 1, (3, 1)) \
         + noise * rng.normal(0, 1, (3, P))
     r, spin = rng.uniform(0.1, 1.0, P), rng.uniform(0.0, 0.2, P)
-    G = collisions_module._reach(C, D, spin, r, clearance)
+    G = broad.reach(C, D, spin, r, clearance)
     p, q = np.triu_indices(P, 1)
     g0 = np.linalg.norm(C[:, p] - C[:, q], axis=0) - r[p] - r[q]
     g1 = np.linalg.norm((C + D)[:, p] - (C + D)[:, q], axis=0) - r[p] - r[q]
@@ -395,10 +397,10 @@ def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, om
     coarse steps are longer than the library's (more motion within one, larger
     reaches)."""
     pat = make(seed)
-    geo = _Geometry(pat)
+    geo = Geometry(pat)
     K = 4
     omegas = np.linspace(0.0, omega_max, K)
-    rows, _ = coarse_rows(geo, _States(geo, 1.0, omegas), K, clearance)
+    rows, _ = coarse_rows(geo, States(geo, 1.0, omegas), K, clearance)
     got = {(a, geo.label(p, q)) for a, _, p, q in rows.tolist()}
     found, first = 0, np.inf
     for k in range(K - 1):
@@ -423,7 +425,7 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
     pat = make(seed)
     whole = collisions(pat, omega_max, clearance=clearance)
     chunks, batches = [], []
-    coarse, per_state = collisions_module._coarse_rows, collisions_module._per_state
+    coarse, per_state = broad.coarse_rows, motion.per_state
 
     def counted_rows(*args):
         for rows, m in coarse(*args):
@@ -434,13 +436,13 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
         batches.append(len(s))
         return per_state(f, st, s, p, q)
 
-    monkeypatch.setattr(collisions_module, "ROWS", 8)
-    monkeypatch.setattr(collisions_module, "_coarse_rows", counted_rows)
-    monkeypatch.setattr(collisions_module, "_per_state", counted_per_state)
+    monkeypatch.setattr(broad, "ROWS", 8)
+    monkeypatch.setattr(broad, "coarse_rows", counted_rows)
+    monkeypatch.setattr(motion, "per_state", counted_per_state)
     chunked = collisions(pat, omega_max, clearance=clearance)
     assert chunked == whole and not whole.free
     assert max(chunks) <= 8 and max(batches) <= 2 * 8
-    assert len(chunks) > 3 * int(np.ceil(omega_max / collisions_module.MAX_STEP))
+    assert len(chunks) > 3 * int(np.ceil(omega_max / motion.MAX_STEP))
 
 
 @pytest.mark.parametrize("make, seed, clearance, omega_max, tile", [
@@ -448,25 +450,25 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
     (perturbed_miura, 0, 0.4, 3.0, 2), (perturbed_miura, 1, 0.2, 3.0, 5)])  # similar panels
 def test_tile_fits_give_the_rows_of_the_global_fit(make, seed, clearance, omega_max, tile,
                                                   monkeypatch):
-    """The broad phase by grid tiles (each with its own affine fit, _local_pairs) keeps
+    """The broad phase by grid tiles (each with its own affine fit, broad.local_pairs) keeps
     exactly the rows and bounds of every coarse step that the one global fit keeps
-    (_close_pairs), and the report is the same."""
+    (the global query), and the report is the same."""
     pat = make(seed)
-    geo = _Geometry(pat)
+    geo = Geometry(pat)
     omegas = np.linspace(0.0, omega_max, 8)
 
     def rows_and_report(min_tiles: int):
-        monkeypatch.setattr(collisions_module, "MIN_TILES", min_tiles)
-        rows, m = coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), clearance)
+        monkeypatch.setattr(broad, "MIN_TILES", min_tiles)
+        rows, m = coarse_rows(geo, States(geo, 1.0, omegas), len(omegas), clearance)
         order = np.lexsort(rows.T[::-1])
         return rows[order], m[order], collisions(pat, omega_max, clearance=clearance)
 
-    monkeypatch.setattr(collisions_module, "TILE", tile)
-    monkeypatch.setattr(collisions_module, "TILE_REACH", -np.inf)  # tiles in every step
-    assert len(collisions_module._tiles(geo)[2]) >= 4
+    monkeypatch.setattr(broad, "TILE", tile)
+    monkeypatch.setattr(broad, "TILE_REACH", -np.inf)  # tiles in every step
+    assert len(broad.tiles(geo)[2]) >= 4
     calls = []
-    local_pairs = collisions_module._local_pairs
-    monkeypatch.setattr(collisions_module, "_local_pairs",
+    local_pairs = broad.local_pairs
+    monkeypatch.setattr(broad, "local_pairs",
                         lambda *a: calls.append(1) or local_pairs(*a))
     rows, m, report = rows_and_report(1)
     assert len(calls) >= len(omegas) - 1  # every coarse step took the tiles
@@ -483,18 +485,18 @@ def test_tiles_only_where_the_global_reaches_are_far(monkeypatch):
     however many there are; with TILE_REACH = 0 (every median reach is above it) each
     does."""
     pat = perturbed_miura(0)
-    geo = _Geometry(pat)
+    geo = Geometry(pat)
     omegas = np.linspace(0.0, 3.0, 8)
-    monkeypatch.setattr(collisions_module, "TILE", 2)
-    monkeypatch.setattr(collisions_module, "MIN_TILES", 1)
+    monkeypatch.setattr(broad, "TILE", 2)
+    monkeypatch.setattr(broad, "MIN_TILES", 1)
     calls = []
-    local_pairs = collisions_module._local_pairs
-    monkeypatch.setattr(collisions_module, "_local_pairs",
+    local_pairs = broad.local_pairs
+    monkeypatch.setattr(broad, "local_pairs",
                         lambda *a: calls.append(1) or local_pairs(*a))
-    coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), 0.0)
+    coarse_rows(geo, States(geo, 1.0, omegas), len(omegas), 0.0)
     assert calls == []
-    monkeypatch.setattr(collisions_module, "TILE_REACH", 0.0)
-    coarse_rows(geo, _States(geo, 1.0, omegas), len(omegas), 0.0)
+    monkeypatch.setattr(broad, "TILE_REACH", 0.0)
+    coarse_rows(geo, States(geo, 1.0, omegas), len(omegas), 0.0)
     assert len(calls) == len(omegas) - 1
 
 
@@ -510,7 +512,7 @@ def test_tiles_only_where_the_global_reaches_are_far(monkeypatch):
      r"^B must be triangles \(2, 3, 3\)"),
     (lambda pat: triangles_intersect(np.zeros((1, 3, 3)), np.zeros((1, 3, 3)), scale=0),
      "^scale must be a finite number > 0"),
-    (lambda pat: collisions_module.near_pairs(pat, np.zeros((2, 2, 3)), 1.0),
+    (lambda pat: near_pairs(pat, np.zeros((2, 2, 3)), 1.0),
      r"^Y must be an array of finite numbers of shape \(3, 4, 3\)"),
     (lambda pat: panel_distance(None, np.zeros((1, 12, 3)), [0], [0], [1]),
      r"^geo must be the crease pattern \(rffqm_nlp.Pattern\) of the states"),

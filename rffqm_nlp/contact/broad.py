@@ -1,0 +1,325 @@
+"""Broad phase of the contact checks: the panel pairs a coarse step of the motion must look at.
+
+:func:`coarse_rows` gives, for a coarse step [w0, w1], every pair that the step's sphere
+gaps g(w0), g(w1) (centre distance minus both radii) and its cheapest motion bound m do
+not certify clear, (g(w0) + g(w1) - m) / 2 <= clearance, however far apart, by
+:class:`scipy.spatial.cKDTree` queries on the panel centres at w0.
+
+* Reaches: with an affine fit of the centres' displacements over the step,
+  D_p = A C_p + t + e_p (least squares on the centres' leading principal directions), and
+  L the spectral norm of A, |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, so every such
+  pair has g(w0) <= G_p + G_q with a reach per panel G_p = (clearance + (SAFETY + 1)
+  (L r_p + |e_p|) + SAFETY s_p) / (2 - (SAFETY + 1) L) (r its radius, s its spin: its
+  largest vertex displacement about its centre; :func:`reach`). The tree queries find
+  the centres within r_p + G_p + r_q + G_q (blocks of panels queried against the panels
+  from the block on: in the grid's order when r + G is nearly the same for all, else by
+  decreasing r + G, so that very unequal reaches do not make every query large). A
+  folding sheet's centres move nearly affinely over a short step, so the reaches are a
+  fraction of a panel. Every gap is lowered, every bound raised, by a small slack (a
+  bound on the rounding).
+* Tiles: near flat, though, a large sheet bends: one affine map misfits its
+  displacements by about the same length whatever the panels' size, so the reaches grow
+  to many panels (docs/collisions.md). In such a step (the median reach above
+  ``TILE_REACH`` panel radii), from ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels on,
+  each tile gets its own fit (:func:`local_pairs`): the bound above holds for any affine
+  map, so a pair (p, q) with p in a tile and both residuals measured against that tile's
+  fit needs g(w0) <= G_p + G_q with the tile's reaches too; a pair is a candidate when
+  both the tile's and the global reaches allow it (a subset of the global candidates
+  that keeps every pair they must give).
+* Memory: no step's pairs are held at once. The tree queries give their pairs in chunks
+  of about ``ROWS`` (the first block's count bounds it, each next block is sized from the
+  last one's pairs per panel).
+
+The broad phase adds no assumption to the motion's (:mod:`~rffqm_nlp.contact.motion`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .panels import Geometry, States
+from .vectors import column_norm, most_of, norm
+
+#: Factor on a step's relative vertex displacement (chord) bounding its path: the
+#: motion's one assumption (:mod:`~rffqm_nlp.contact.motion`), which the reaches share.
+SAFETY = 2.0
+
+#: Most panel pairs the broad phase and the refinement hold at once (tree query results,
+#: candidate rows of a step, rows of a refinement level), so that the check's memory
+#: grows like the pattern, not like its pairs.
+ROWS = 2 ** 18
+
+#: The broad phase takes the panels in the grid's order (blocks of nearby panels) when
+#: their largest radius plus reach is at most this times the smallest, else by decreasing
+#: radius plus reach (blocks of big panels queried with a big radius, the rest small).
+SPREAD = 1.5
+
+#: Panels a side of the grid's tiles, each with its own affine fit of a coarse step's
+#: displacements in the broad phase (:func:`local_pairs`), used from MIN_TILES tiles on
+#: (below, one query over the whole sheet costs less than a query per tile).
+TILE = 24
+MIN_TILES = 4
+#: ... and only in a coarse step whose global reaches are large: their median above
+#: TILE_REACH times the panels' median radius (a sheet folding nearly uniformly keeps them
+#: a fraction of a panel, and there the tiles' fits cost more than they save).
+TILE_REACH = 2.0
+
+
+def coarse_rows(geo: Geometry, st: States, a: int, clearance: float):
+    """The rows (n, 4) = (a, a + 1, p, q) of the coarse step from state a to a + 1 of
+    ``st``: every pair that the sphere gaps g(a), g(a + 1) and the rows' motion bound m do
+    not certify clear, (g(a) + g(a + 1) - m) / 2 <= clearance; with those bounds m (n,),
+    SAFETY times the centres' relative displacement plus each panel's largest vertex
+    displacement about its centre (at least :func:`~rffqm_nlp.contact.motion.motion_bound`'s).
+    In chunks (rows, m) of at most ROWS pairs, from the tree queries of
+    :func:`_close_pairs` with the panels' reaches of :func:`reach`, or, where those are
+    far (TILE_REACH) and from MIN_TILES tiles on, of :func:`local_pairs`."""
+    start, end = st.panels(a), st.panels(a + 1)
+    C, D = start.centre, end.centre - start.centre                  # (3, P)
+    dQ = (end.corners - start.corners) - D[:, None]                 # (3, 4, P)
+    spin = most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
+    r = geo.radius
+    G = reach(C, D, spin, r, clearance)
+    eps = _slack(geo, np.stack([C, end.centre])) + 1e-5 * float(G.max())
+    far = np.median(G) > TILE_REACH * np.median(r)
+    grid = tiles(geo) if far else None
+    pairs = (local_pairs(geo, grid, C, D, spin, r + G, clearance, eps)
+             if grid is not None and len(grid[2]) >= MIN_TILES
+             else _close_pairs(geo, C.T, r + G, 2 * eps))
+    for p, q, dist in pairs:
+        rp, rq = r.take(p), r.take(q)
+        m = SAFETY * (column_norm(D.take(p, axis=1) - D.take(q, axis=1))
+                      + spin.take(p) + spin.take(q))
+        g0 = dist - rp - rq
+        g1 = column_norm(end.centre.take(p, axis=1) - end.centre.take(q, axis=1)) - rp - rq
+        kept = np.flatnonzero((g0 + g1 - m) / 2 <= clearance + 2 * eps)
+        rows = np.stack([np.full(len(kept), a), np.full(len(kept), a + 1), p[kept], q[kept]],
+                        axis=1)
+        yield rows, m[kept] + eps
+
+
+def pairs_within(geo: Geometry, C: np.ndarray, reach: float) -> np.ndarray:
+    """Pairs (n, 2), p < q, sharing no vertex, whose bounding spheres about the centres
+    C (P, 3) grown by ``reach`` overlap."""
+    R = geo.radius + reach / 2
+    chunks = [np.stack([p, q], axis=1)
+              for p, q, _ in _close_pairs(geo, C, R, 2 * _slack(geo, C))]
+    return np.concatenate(chunks or [np.zeros((0, 2), dtype=np.int64)])
+
+
+# --------------------------------------------------------------------------- reaches
+
+def _fit_reach(L, r: np.ndarray, e: np.ndarray, spin: np.ndarray,
+               clearance: float) -> np.ndarray:
+    """The reaches G of panels with radii r, residuals e and spins (each (n,)) against an
+    affine fit of spectral norm L (a float, or (n,) per panel): :func:`reach`'s bound."""
+    return (clearance + (SAFETY + 1) * (L * r + e) + SAFETY * spin) / (2 - (SAFETY + 1) * L)
+
+
+def reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
+          clearance: float) -> np.ndarray:
+    """The panels' reaches G (P,) over a step: every pair whose sphere gaps g(a), g(b) at
+    its start and end and motion bound m = SAFETY (|D_p - D_q| + spin_p + spin_q) leave
+    (g(a) + g(b) - m) / 2 <= clearance has g(a) <= G_p + G_q. From the centres C (3, P)
+    at the start, their displacements D (3, P), the spins (P,) and radii r (P,).
+
+    With an affine fit D_p = A C_p + t + e_p and L = |A| (spectral norm),
+    |D_p - D_q| <= L |C_p - C_q| + |e_p| + |e_q|, |C_p - C_q| = g(a) + r_p + r_q and g(b) >=
+    g(a) - |D_p - D_q|; so such a pair has g(a) (2 - (SAFETY + 1) L) <= 2 clearance + h_p +
+    h_q, h = (SAFETY + 1) (L r + |e|) + SAFETY spin. The fit: least squares on the k
+    leading principal directions of the centres (k = 0: A = 0, a translation; a sheet
+    still nearly flat makes the third direction ill-conditioned), the k of the smallest
+    largest reach among those with (SAFETY + 1) L < 2."""
+    X = C - C.mean(axis=1, keepdims=True)
+    E = D - D.mean(axis=1, keepdims=True)                           # t = mean(D) - A mean(C)
+    lam, U = np.linalg.eigh(X @ X.T)                                # X's principal directions
+    U, lam, EX = U[:, ::-1], lam[::-1], E @ X.T                     # largest first
+    best = None
+    for k in range(4):                           # A = E X^T U_k diag(1 / lam_k) U_k^T
+        A = (EX @ U[:, :k] / np.where(lam[:k] > 0, lam[:k], np.inf)) @ U[:, :k].T
+        L = float(np.linalg.norm(A, 2))
+        if (SAFETY + 1) * L >= 2:
+            continue
+        G = _fit_reach(L, r, norm((E - A @ X).T), spin, clearance)
+        if best is None or (r + G).max() < (r + best).max():
+            best = G
+    return best
+
+
+def _slack(geo: Geometry, C: np.ndarray) -> float:
+    """A bound on the float32 rounding error of a sphere gap or a relative displacement
+    computed from centroids C (any shape) and the radii: 1e-5 (over a hundred units in
+    the last place) times the largest coordinate plus the largest radius."""
+    return 1e-5 * (float(np.abs(C).max(initial=0.0)) + float(geo.radius.max()))
+
+
+# --------------------------------------------------------------------------- tree queries
+
+def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
+    """The pairs p < q sharing no vertex whose centres C (P, 3) are at most R_p + R_q +
+    ``slack`` apart (R (P,) >= 0), with those distances, in chunks (p, q, dist) (n,) of at
+    most ROWS pairs. Panels by decreasing R; the first 64 (or fewer, halved until the
+    tree counts at most ROWS pairs within twice the largest R of them) estimate the pairs
+    per panel. When one query with twice the largest R is expected to give at most
+    0.7 ROWS pairs, that query; otherwise each pair is found once, from the panel with the
+    larger R: a block of panels queried (a tree of its own) against a tree on the panels
+    from the block on, with twice the block's largest R, each block sized from the pairs
+    per panel of the last query for 0.7 ROWS (the query radius only shrinks)."""
+    order = (np.arange(len(R)) if R.max() <= SPREAD * R.min()
+             else np.argsort(-R, kind="stable"))
+    X, R, ij = C[order], R[order], geo.ij[order]
+    top = np.maximum.accumulate(R[::-1])[::-1]          # the largest R from each on
+    P, c0, base, size = len(X), 0, 0, 64
+    rest = cKDTree(X)
+    while True:
+        head = cKDTree(X[:size])
+        found = head.count_neighbors(rest, 2 * float(top[0]) + slack)
+        if size == 1 or found <= ROWS:
+            break
+        size //= 2
+    if found * P / min(size, P) <= 1.4 * ROWS:   # ordered pairs, self included: one query
+        i, j = rest.query_pairs(2 * float(top[0]) + slack, output_type="ndarray").T
+        yield from _kept(order, R, ij, i, j, norm(X[i] - X[j]), slack)
+        return
+    while c0 < P:
+        if 2 * (c0 - base) > P - base:          # a smaller tree on the panels still to come
+            base, rest = c0, cKDTree(X[c0:])
+        c1 = min(P, c0 + size)
+        head = cKDTree(X[c0:c1])
+        hits = head.sparse_distance_matrix(rest, float(R[c0:c1].max() + top[c0]) + slack,
+                                           output_type="ndarray")
+        i, j, dist = hits["i"] + c0, hits["j"] + base, hits["v"]
+        size = max(1, int(0.7 * (c1 - c0) * ROWS / max(len(hits), 1)))
+        del hits
+        yield from _kept(order, R, ij, i, j, dist, slack)
+        c0 = c1
+
+
+def _kept(order: np.ndarray, R: np.ndarray, ij: np.ndarray, i: np.ndarray, j: np.ndarray,
+          dist: np.ndarray, slack: float):
+    """Of the pairs i, j (n,) of panels by rank (``order`` (P,) the panels, R (P,) and ij
+    (P, 2) by rank) at distances ``dist`` (n,), those with j > i, at most R_i + R_j +
+    ``slack`` apart and sharing no vertex, as (p, q, dist) with p < q, in chunks of at
+    most ROWS."""
+    k = np.flatnonzero(j > i)                            # each test on the pairs left
+    i, j, dist = i[k], j[k], dist[k]
+    k = np.flatnonzero(dist <= R[i] + R[j] + slack)
+    i, j, dist = i[k], j[k], dist[k]
+    k = np.flatnonzero(np.maximum(np.abs(ij[i, 0] - ij[j, 0]), np.abs(ij[i, 1] - ij[j, 1])) >= 2)
+    p, q, dist = order[i[k]], order[j[k]], dist[k]
+    for k in range(0, len(p), ROWS):
+        a, b = p[k:k + ROWS], q[k:k + ROWS]
+        yield np.minimum(a, b), np.maximum(a, b), dist[k:k + ROWS]
+
+
+# --------------------------------------------------------------------------- tiles
+
+def tiles(geo: Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid's tiles of TILE x TILE panels: the tile of each panel (P,), the panels in
+    tile order (P,) and where each tile starts in that order (T,)."""
+    nj = -(-geo.M // TILE)
+    tile = (geo.ij[:, 0] // TILE) * nj + geo.ij[:, 1] // TILE
+    perm = np.argsort(tile, kind="stable")
+    starts = np.flatnonzero(np.r_[True, tile[perm][1:] != tile[perm][:-1]])
+    return tile, perm, starts
+
+
+def _tile_fits(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
+               clearance: float, tile: np.ndarray, perm: np.ndarray, starts: np.ndarray):
+    """:func:`reach`'s fit on each tile's panels alone, all tiles at once: L (T,), A
+    (T, 3, 3), the mean centre and displacement (T, 3) and whether a fit with
+    (SAFETY + 1) L < 2 exists (T,). C, D (3, P), spin and r (P,) as :func:`reach`'s."""
+    Cs, Ds = C.T[perm], D.T[perm]                                   # (P, 3) by tile
+    count = np.diff(np.r_[starts, len(perm)])
+    mc = np.add.reduceat(Cs, starts, axis=0) / count[:, None]
+    md = np.add.reduceat(Ds, starts, axis=0) / count[:, None]
+    t = tile[perm]
+    X, E = Cs - mc[t], Ds - md[t]
+    XX = np.add.reduceat(X[:, :, None] * X[:, None, :], starts, axis=0)   # (T, 3, 3)
+    EX = np.add.reduceat(E[:, :, None] * X[:, None, :], starts, axis=0)
+    lam, U = np.linalg.eigh(XX)
+    U, lam = U[:, :, ::-1], lam[:, ::-1]                            # largest first
+    rs, ss = r[perm], spin[perm]
+    bestA, bestL = np.zeros((len(starts), 3, 3)), np.zeros(len(starts))
+    best = np.full(len(starts), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for k in range(4):
+            Uk = U[:, :, :k]
+            A = (EX @ Uk / np.where(lam[:, None, :k] > 0, lam[:, None, :k], np.inf)) \
+                @ Uk.transpose(0, 2, 1)
+            L = np.linalg.norm(A, 2, axis=(1, 2)) if k else np.zeros(len(starts))
+            e = norm(E - np.einsum("pij,pj->pi", A[t], X))
+            G = _fit_reach(L[t], rs, e, ss, clearance)
+            top = np.maximum.reduceat(rs + G, starts)
+            ok = np.isfinite(L) & ((SAFETY + 1) * L < 2) & np.isfinite(top) & (top < best)
+            best[ok], bestL[ok], bestA[ok] = top[ok], L[ok], A[ok]
+    return bestL, bestA, mc, md, np.isfinite(best)
+
+
+def local_pairs(geo: Geometry, grid: tuple[np.ndarray, np.ndarray, np.ndarray],
+                C: np.ndarray, D: np.ndarray, spin: np.ndarray, Rg: np.ndarray,
+                clearance: float, eps: float):
+    """The pairs of :func:`_close_pairs` (C.T, Rg, 2 eps) that are also within the reaches
+    of the affine fit of p's grid tile (:func:`_tile_fits`; both panels' residuals against
+    that one fit, which bounds |D_p - D_q| as the global fit does): a superset of the pairs
+    the step's filter keeps, found with far smaller queries where the sheet bends (one
+    affine map fits a tile's displacements far better than the whole sheet's). C, D (3, P),
+    spin (P,) as :func:`reach`'s, Rg (P,) the radii plus the global reaches, ``grid``
+    the tiles of :func:`tiles`. In chunks (p, q, dist) of at most ROWS pairs."""
+    r = geo.radius
+    tile, perm, starts = grid
+    L, A, mc, md, ok = _tile_fits(C, D, spin, r, clearance, tile, perm, starts)
+    Ct = np.ascontiguousarray(C.T)
+    e = norm(D.T - md[tile] - np.einsum("pij,pj->pi", A[tile], Ct - mc[tile]))
+    own = np.where(ok[tile], r + _fit_reach(L[tile], r, e, spin, clearance), Rg)
+    slack = np.where(ok, 4 * eps / (2 - (SAFETY + 1) * L) + 2 * eps, 2 * eps)
+    groups = np.split(perm, starts[1:])
+    centre = np.stack([Ct[g].mean(axis=0) for g in groups])
+    rho = np.array([float(norm(Ct[g] - c).max()) for g, c in zip(groups, centre)])
+    Rmax = np.array([float(Rg[g].max()) for g in groups])
+    lists = cKDTree(Ct).query_ball_point(centre, rho + Rmax + float(Rg.max()) + 4 * eps,
+                                         return_sorted=False)
+    out, held = [], 0
+    for T, g in enumerate(groups):
+        cand = np.asarray(lists[T], dtype=np.int64)
+        cand = cand[cand > g.min()]
+        if not cand.size:
+            continue
+        Rp = own[g]
+        if ok[T]:
+            eq = norm(D.T[cand] - md[T] - (Ct[cand] - mc[T]) @ A[T].T)
+            Rq = r[cand] + _fit_reach(L[T], r[cand], eq, spin[cand], clearance)
+        else:
+            Rq = Rg[cand]
+        Rgq = Rg[cand]  # a pair must pass both: the tile's reaches and the global ones
+        near = norm(Ct[cand] - centre[T]) <= rho[T] + np.minimum(
+            float(Rp.max()) + Rq + slack[T], Rmax[T] + Rgq + 2 * eps)
+        cand, Rq, Rgq = cand[near], Rq[near], Rgq[near]
+        if not cand.size:
+            continue
+        hits = cKDTree(Ct[g]).sparse_distance_matrix(
+            cKDTree(Ct[cand]), min(float(Rp.max() + Rq.max() + slack[T]),
+                                   float(Rmax[T] + Rgq.max() + 2 * eps)), output_type="ndarray")
+        i, j, dist = hits["i"], hits["j"], hits["v"]
+        p, q = g[i], cand[j]
+        k = np.flatnonzero((q > p) & (dist <= Rp[i] + Rq[j] + slack[T])
+                           & (dist <= Rg[p] + Rg[q] + 2 * eps))
+        p, q, dist = p[k], q[k], dist[k]
+        k = np.flatnonzero(np.maximum(np.abs(geo.ij[p, 0] - geo.ij[q, 0]),
+                                      np.abs(geo.ij[p, 1] - geo.ij[q, 1])) >= 2)
+        out.append((p[k], q[k], dist[k]))
+        held += len(k)
+        if held >= ROWS:
+            yield from _in_chunks(out)
+            out, held = [], 0
+    yield from _in_chunks(out)
+
+
+def _in_chunks(found: list[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+    """The pairs (p, q, dist) of ``found`` joined and cut into chunks of at most ROWS."""
+    if not found:
+        return
+    p, q, dist = (np.concatenate(x) for x in zip(*found))
+    for k in range(0, len(p), ROWS):
+        yield p[k:k + ROWS], q[k:k + ROWS], dist[k:k + ROWS]

@@ -1,0 +1,210 @@
+"""Contact along the folding motion: the first omega at which two panels come too close.
+
+* Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
+  a step [w0, w1] a candidate pair (:func:`~rffqm_nlp.contact.broad.coarse_rows`) is
+  certified clear when (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance
+  and m bounds how far the pair's distance can change over the step
+  (:func:`motion_bound`): SAFETY times the largest relative displacement of a vertex of
+  one panel against a vertex of the other between w0 and w1 (a rigid motion's
+  displacement is affine on a panel, so its extreme is at a vertex; the 16 vertex pairs
+  are compared, after a coarser bound, the centres' relative displacement plus each
+  panel's largest vertex displacement about its centre, has failed to certify the step),
+  or SAFETY times the largest displacement of a vertex of one panel in the frame of the
+  other (origin at its corner a, axes along its edge a -> b and its normal), whichever is
+  smaller: in its own frame a panel is still and the other moves rigidly, so the
+  distance changes by at most that. The frame bound is the one that certifies panels
+  hinged across a very thin panel (side-length LP patterns): they stay close while their
+  far corners move a lot, but in one another's frame they hardly move. Distances are
+  first bounded from below cheaply (:func:`~rffqm_nlp.contact.narrow.lower_bound`); the
+  exact distance is computed only where that bound does not certify the step, and only
+  an exact distance reports a contact.
+* Uncertified pairs are followed into the halves of the step (one batched fold per
+  level) until they are certified, touch at a sample (d <= clearance), or the step is
+  shorter than ``tol``; contacts after the earliest one found are dropped on the way.
+  The earliest sample in contact lies within ``tol`` after the true first contact.
+* Memory and order: the coarse steps are taken in order, a step's rows refined as the
+  broad phase gives them (in batches of at most ``ROWS`` rows), and no step that starts
+  after the earliest contact found is looked at. The result does not depend on the order
+  or the batches: a pair in contact at a sample is found by every row that has that
+  sample, and only rows that start after the earliest contact found are dropped.
+* Guarantee and its assumptions: no contact is missed provided that within one step the
+  path of every vertex relative to another, and of every vertex in the frame of another
+  panel, is at most SAFETY times its chord (smooth motion on short steps; the second,
+  added with the frame bound, is of the same kind as the first). A pair whose distance
+  dips below the clearance only between two samples less than ``tol`` apart may be
+  missed (a near miss shorter than ``tol`` in omega).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import broad
+from .broad import SAFETY
+from .narrow import distance, lower_bound
+from .panels import Geometry, PanelPair, States
+from .vectors import cross, dot, most, norm
+
+#: Largest coarse step in omega.
+MAX_STEP = 0.1
+
+#: Panel pairs per batch of the bounds and distances along the motion.
+BATCH = 2048
+
+
+def first_contact(geo: Geometry, w_max: float, clearance: float,
+                  tol: float) -> tuple[float | None, list[PanelPair]]:
+    """The earliest |omega| in [0, |w_max|] with two panels within ``clearance``, signed
+    like ``w_max`` (None when there is none), and the panel pairs in contact there. The
+    coarse steps in order, their rows refined as the broad phase gives them, once at least
+    ROWS are held (or at the end); no step that starts after the earliest contact found
+    is looked at."""
+    sign = -1.0 if w_max < 0 else 1.0
+    W = abs(w_max)
+    n_steps = max(1, int(np.ceil(W / MAX_STEP)))
+    st = States(geo, sign, np.linspace(0.0, W, n_steps + 1))
+    found, held = _Contact(geo), []
+    for a in range(n_steps):
+        if st.omegas[a] > found.best:
+            break
+        for chunk in broad.coarse_rows(geo, st, a, clearance):
+            held.append(chunk)
+            if sum(len(rows) for rows, _ in held) >= broad.ROWS:
+                _refine(st, *_joined(held), clearance, tol, found)
+                held = []
+    if held:
+        _refine(st, *_joined(held), clearance, tol, found)
+    if not np.isfinite(found.best):
+        return None, []
+    return sign * float(found.best) if found.best > 0 else 0.0, found.pairs
+
+
+def _joined(chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Chunks (rows (n, 4), bounds (n,)) put together."""
+    return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
+
+
+class _Contact:
+    """The earliest contact found so far: its |omega| ``best`` (inf: none) and the panel
+    pairs in contact there (1-based labels, sorted)."""
+
+    def __init__(self, geo: Geometry):
+        self.geo, self.best, self.pairs = geo, np.inf, []
+
+    def record(self, w: np.ndarray, hit: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
+        """Take the pairs p, q (n,) in contact (``hit`` (n,) bool) at the |omega| w (n,)
+        into account."""
+        if not hit.any() or w[hit].min() > self.best:
+            return
+        w_hit = w[hit].min()
+        at = hit & (w == w_hit)
+        new = [self.geo.label(a, b) for a, b in zip(p[at], q[at])]
+        self.pairs = sorted(set(new + (self.pairs if w_hit == self.best else [])))
+        self.best = w_hit
+
+
+def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: float,
+            found: _Contact) -> None:
+    """Follow the rows (n, 4) = (state a, state b, p, q), with upper bounds m (n,) on the
+    change of their distance (inf: none yet), into the halves of their steps until each
+    is certified clear, in contact at a sample, or shorter than ``tol``; contacts go to
+    ``found``, rows that start after its earliest contact are dropped. In batches of at
+    most ROWS rows (a stack of the halves still to follow)."""
+    stack = [(rows, m)]
+    while stack:
+        rows, m = stack.pop()
+        if len(rows) > broad.ROWS:
+            stack.append((rows[broad.ROWS:], m[broad.ROWS:]))
+            rows, m = rows[:broad.ROWS], m[:broad.ROWS]
+        omegas = np.asarray(st.omegas)
+        keep = omegas[rows[:, 0]] <= found.best
+        rows, m = rows[keep], m[keep]
+        if not rows.size:
+            continue
+        ia, ib, p, q = rows.T
+        wa, wb, n = omegas[ia], omegas[ib], len(rows)
+        d = per_state(lower_bound, st, np.concatenate([ia, ib]), np.tile(p, 2),
+                      np.tile(q, 2))
+        da, db = d[:n], d[n:]
+        loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
+        m[loose] = SAFETY * _in_batches(motion_bound, st, ia[loose], ib[loose], p[loose],
+                                        q[loose])
+        exact = (da + db - m) / 2 <= clearance
+        k = int(exact.sum())
+        d = per_state(distance, st, np.concatenate([ia[exact], ib[exact]]),
+                      np.tile(p[exact], 2), np.tile(q[exact], 2))
+        da[exact], db[exact] = d[:k], d[k:]
+        for w_s, d_s in ((wa, da), (wb, db)):
+            found.record(w_s, exact & (d_s <= clearance), p, q)
+        open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
+        if open_.any():
+            halves = _split(rows[open_], st)
+            stack.append((halves, np.full(len(halves), np.inf)))
+
+
+def motion_bound(st: States, ia: np.ndarray, ib: np.ndarray, p: np.ndarray,
+                 q: np.ndarray) -> np.ndarray:
+    """Bounds (n,) on how far the distance of panels p and q can change from state ia to
+    state ib (all (n,)): the smallest of the largest displacement of a vertex of q
+    relative to a vertex of p (16 vertex pairs) and the largest displacement of a vertex
+    of one panel in the frame of the other (4 vertices, both ways)."""
+    Pa, Pb, Qa, Qb = (st.quads(s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
+    dP, dQ = Pb - Pa, Qb - Qa                                        # (n, 4, 3)
+    m = most(norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+    for A, B, C, D, x in ((Pa, Pb, Qa, Qb, p), (Qa, Qb, Pa, Pb, q)):   # C, D in A's frame
+        La, Lb = _local(A, st.normals(ia, x), C), _local(B, st.normals(ib, x), D)
+        m = np.minimum(m, most(norm(Lb - La)))
+    return m
+
+
+def _local(A: np.ndarray, n: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 4, 3) of the points B (n, 4, 3) in the frame of the panel with
+    corners A (n, 4, 3) and unit normal n (n, 3): origin at corner a, axes along a -> b,
+    the normal's cross product with it, and the normal."""
+    e1 = A[:, 1] - A[:, 0]
+    e1 = e1 - dot(e1, n)[:, None] * n
+    e1 = e1 / norm(e1)[:, None]
+    e2 = cross(n, e1)
+    r = B - A[:, :1]
+    return np.stack([dot(r, e1[:, None]), dot(r, e2[:, None]), dot(r, n[:, None])], axis=-1)
+
+
+def per_state(f, st: States, s: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """f(st, s, p, q) (n,) computed once for each distinct (state, pair) among the n
+    (s, p, q all (n,)), in batches of ``BATCH`` (their temporaries stay in cache)."""
+    P = st.geo.N * st.geo.M
+    first, inv = _distinct((s * P + p) * P + q)
+    s, p, q = s[first], p[first], q[first]
+    out = [f(st, s[k:k + BATCH], p[k:k + BATCH], q[k:k + BATCH])
+           for k in range(0, len(s), BATCH)]
+    return np.concatenate(out or [np.zeros(0)])[inv]
+
+
+def _in_batches(f, st: States, *index: np.ndarray) -> np.ndarray:
+    """f(st, *index) (n,) for the index arrays (all (n,)), in batches of ``BATCH``."""
+    n = len(index[0])
+    out = [f(st, *(x[k:k + BATCH] for x in index)) for k in range(0, n, BATCH)]
+    return np.concatenate(out or [np.zeros(0)])
+
+
+def _distinct(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (u,) of one occurrence of each distinct value of ``code`` (n,) and the
+    index (n,) of every entry's value among them (by sorting)."""
+    order = np.argsort(code, kind="stable")
+    c = code[order]
+    new = np.ones(len(c), dtype=bool)
+    new[1:] = c[1:] != c[:-1]
+    inv = np.empty(len(c), dtype=np.int64)
+    inv[order] = np.cumsum(new) - 1
+    return order[new], inv
+
+
+def _split(rows: np.ndarray, st: States) -> np.ndarray:
+    """Halve the steps of ``rows`` (n, 4): the child rows (2n, 4), the midpoint states
+    not yet in ``st`` added to it."""
+    first, inv = _distinct(rows[:, 0] * len(st.omegas) + rows[:, 1])
+    w = np.asarray(st.omegas)
+    mid = st.index((w[rows[first, 0]] + w[rows[first, 1]]) / 2)[inv]
+    left = np.stack([rows[:, 0], mid, rows[:, 2], rows[:, 3]], axis=1)
+    right = np.stack([mid, rows[:, 1], rows[:, 2], rows[:, 3]], axis=1)
+    return np.concatenate([left, right])
