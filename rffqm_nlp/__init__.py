@@ -15,7 +15,7 @@ import importlib
 
 from ._version import __version__
 from .contact.collisions import CollisionReport, collisions
-from .design.problem import DesignProblem, SolveOptions, load_design
+from .design import DesignProblem, SolveOptions, load_design
 from .design.results import DesignResult, Fit, SolveStats
 from .errors import (BoundaryDataError, InfeasibleDesign, InputError, MarchingError,
                      RffqmError, SolverFailed, SurfaceError)

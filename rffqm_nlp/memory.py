@@ -1,7 +1,13 @@
-"""What this machine can hold: the memory still available to this process, and the one-line
-refusal, before any work, of a computation whose estimate exceeds it (the design solve,
-:func:`rffqm_nlp.design.problem.check_memory`; the side-length programs,
-:func:`rffqm_nlp.model.lengths.check_memory`; ``rffqm march``)."""
+"""What this machine can hold, and the one memory model of the package.
+
+The memory still available to this process (:func:`available`), the one-line refusal, before
+any work, of a computation whose estimate exceeds it (:func:`refuse_beyond`), and every
+estimate: the design solve (:func:`design_estimate`, used by
+:func:`rffqm_nlp.design.check_memory`), the side-length programs (:func:`lengths_estimate`,
+used by :func:`rffqm_nlp.model.lengths.check_memory`) and the commands ``rffqm march``,
+``fold`` and ``render``. Each estimate is a model fitted, from above, to peaks measured on
+this project's machines (docs/solvers.md, "Memory model").
+"""
 
 from __future__ import annotations
 
@@ -92,3 +98,56 @@ def gif_estimate(N: int, M: int, frames: int, size: tuple[int, int]) -> float:
     ``size`` (width, height) pixels each."""
     return (RENDER_BASE - COMMAND_BASE + march_estimate(N, M, frames)
             + GIF_PER_PIXEL * float(size[0]) * size[1] * frames)
+
+
+# --------------------------------------------------------------------------- side lengths
+#: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
+#: each side-length program holds at its peak, on top of :data:`BASE`: "lp" HiGHS' LPs
+#: (:func:`rffqm_nlp.model.lengths.side_length_lp` and the max-min of
+#: :func:`rffqm_nlp.model.lengths.side_length_nlp`), "nlp" IPOPT's "uniform" NLP
+LENGTHS_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
+
+
+def lengths_estimate(N: int, M: int, program: str) -> float:
+    """Bytes that a side-length ``program`` ("lp" or "nlp") needs for N x M panels:
+    BASE + LENGTHS_PER_UNIT[program] N M (N + M)."""
+    return BASE + LENGTHS_PER_UNIT[program] * float(N) * M * (N + M)
+
+
+# --------------------------------------------------------------------------- the design
+#: Bytes per panel that a design solve holds, on top of :data:`BASE`, for each path
+#: ("sequential", "simultaneous": IPOPT's transcriptions with MUMPS' factor;
+#: "levenberg-marquardt": the NLP, its Jacobians from stencils and their blocks by level),
+#: fitted to the peaks measured on the sphere cap, quarter vase and hyperboloid up to
+#: 500 x 500 panels ...
+DESIGN_PER_PANEL = {"levenberg-marquardt": 18.5e3, "simultaneous": 190e3, "sequential": 250e3}
+#: ... the sequential NLP's derivative build on top ...
+SEQUENTIAL_BUILD = 700e6
+#: ... for Levenberg-Marquardt with a free correspondence this per panel more (the
+#: residuals' Jacobian reads the target lattice) ...
+FREE_PER_PANEL = 1e3
+#: ... and for Levenberg-Marquardt the working set of its sensitivity: about
+#: WORKING_SET * (P + Q) rows (the marched unknowns a later level still needs, and the
+#: identity over the design variables) by the design variables, 8 bytes each ...
+WORKING_SET = 22
+#: ... and its dense design x design matrices held at once (J'J, the metric, the secant
+#: term, the damped matrix and its factor, the last iteration's, the step QP's copy):
+#: counted in the solver, not fitted.
+DESIGN_MATRICES = 10
+
+
+def design_estimate(panels: tuple[int, int], path: str, design: float = 0.0,
+                    free: bool = False) -> float:
+    """Bytes that a design solve of P x Q ``panels`` needs at its peak on ``path``
+    ("levenberg-marquardt", or IPOPT's transcription "simultaneous" or "sequential").
+
+    Levenberg-Marquardt: BASE + (DESIGN_PER_PANEL + FREE_PER_PANEL if ``free``) P Q
+    + 8 WORKING_SET (P + Q) n_d + 8 DESIGN_MATRICES n_d^2, for n_d = ``design`` variables;
+    IPOPT: BASE + DESIGN_PER_PANEL[path] P Q (+ SEQUENTIAL_BUILD for "sequential")."""
+    P, Q = (float(p) for p in panels)
+    per_panel = DESIGN_PER_PANEL[path]
+    if path != "levenberg-marquardt":
+        return BASE + per_panel * P * Q + (SEQUENTIAL_BUILD if path == "sequential" else 0.0)
+    per_panel += FREE_PER_PANEL if free else 0.0
+    return (BASE + per_panel * P * Q + 8.0 * WORKING_SET * (P + Q) * design
+            + 8.0 * DESIGN_MATRICES * design ** 2)

@@ -14,10 +14,11 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp.design import problem as design
+from rffqm_nlp import design, memory
 from rffqm_nlp.design import transcription
+from rffqm_nlp.design.transcription.correspondence import clamped_basis
 from rffqm_nlp.cli import app
-from rffqm_nlp.design.problem import DesignProblem, SolveOptions
+from rffqm_nlp.design import DesignProblem, SolveOptions
 from rffqm_nlp.design.results import DesignResult
 
 #: The 8 x 8 sphere cap's objective at the start x0 and at x0 + 0.01 sin(k), and the norm of
@@ -120,7 +121,7 @@ def test_free_starts_from_the_lattice(tr):
 # ------------------------------------------------------------------ the map's controls
 @pytest.mark.parametrize("n, k", [(5, 4), (11, 4), (11, 6), (101, 4), (3, 3), (2, 2)])
 def test_the_clamped_basis_is_a_partition_of_unity_reproducing_the_identity(n, k):
-    basis, greville = transcription._clamped_basis(n, k)
+    basis, greville = clamped_basis(n, k)
     assert basis.shape == (n, k) and basis.min() >= 0
     np.testing.assert_allclose(basis.sum(axis=1), 1.0, atol=1e-14)
     np.testing.assert_allclose(basis @ greville, np.linspace(0, 1, n), atol=1e-14)
@@ -146,8 +147,8 @@ def test_controls_meeting_the_rows_keep_every_grid_step_above_the_bound(n, m, ku
     u, v = ca.SX.sym("u"), ca.SX.sym("v")
     plane = ca.Function("r", [u, v], [ca.vertcat(u, v, 0)])
     corr = transcription.Correspondence.uniform(plane, domain, (n, m))
-    corr = replace(corr, **dict(zip(("Bu", "gu"), transcription._clamped_basis(n, min(ku, n)))),
-                   **dict(zip(("Bv", "gv"), transcription._clamped_basis(m, min(kv, m)))))
+    corr = replace(corr, **dict(zip(("Bu", "gu"), clamped_basis(n, min(ku, n)))),
+                   **dict(zip(("Bv", "gv"), clamped_basis(m, min(kv, m)))))
     low = transcription.MIN_GRID_STEP
 
     def monotone(g: np.ndarray, columns: int, lo: float, hi: float) -> np.ndarray:
@@ -274,7 +275,7 @@ def test_the_memory_estimate_counts_the_controls_for_levenberg_marquardt():
     problem, options = sphere_cap()
     big = {c: replace(problem, panels=(100, 100), correspondence=c) for c in ("lattice", "free")}
     estimate = {c: design.memory_estimate(p, options) for c, p in big.items()}
-    assert (estimate["lattice"] + design.MEMORY_FREE_PER_PANEL * 100 * 100 < estimate["free"]
+    assert (estimate["lattice"] + memory.FREE_PER_PANEL * 100 * 100 < estimate["free"]
             < 1.2 * estimate["lattice"])
     ipopt = replace(options, solver="ipopt")
     assert (design.memory_estimate(big["free"], ipopt)

@@ -9,15 +9,17 @@ from hypothesis import given, settings, strategies as st
 
 import rffqm_nlp as rq
 from rffqm_nlp.model import boundary
-from rffqm_nlp.design import problem as design
+from rffqm_nlp import design
 from rffqm_nlp.model import numpy_model
 from rffqm_nlp.design.solvers import levenberg_marquardt as reduced
+from rffqm_nlp.design.solvers.levenberg_marquardt import loop
 from rffqm_nlp.targets import shape
 from rffqm_nlp.targets import surfaces
 from rffqm_nlp.design import transcription
-from rffqm_nlp.design.transcription import gauss_newton_hessian, lagrangian_hessian
+from rffqm_nlp.design.solvers.ipopt.hessians import gauss_newton_hessian, lagrangian_hessian
 from rffqm_nlp.model import vertex as vx
-from rffqm_nlp.design.problem import DesignProblem, SolveOptions
+from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.design.solvers import ipopt
 from rffqm_nlp.design.results import DesignResult
 
 TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
@@ -27,7 +29,7 @@ PROBLEM_FIELDS = set(DesignProblem.__dataclass_fields__)
 
 
 def small(name: str, **kw) -> tuple[DesignProblem, SolveOptions]:
-    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_reduced.py);
+    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_levenberg_marquardt.py);
     ``kw`` sets DesignProblem and SolveOptions fields."""
     problem, options = rq.load_design(f"targets/{name}.toml")
     return (replace(problem, **{"panels": (8, 8), **{k: v for k, v in kw.items()
@@ -219,7 +221,7 @@ def test_a_carried_start_that_breaks_a_row_is_moved_toward_the_miura(broken_carr
 
     miura = fine.transcribe(options=opts).x0
     moved = nlp.boundary_class >= 0  # nothing fixed: all of them
-    monkeypatch.setattr(reduced, "TOWARD_REFERENCE", (0.0, 1.0))  # the start, then the Miura's
+    monkeypatch.setattr(loop, "TOWARD_REFERENCE", (0.0, 1.0))  # the start, then the Miura's
     x, t = reduced.admissible_toward(man, nlp.x0, miura)
     assert t == 1.0
     np.testing.assert_allclose(x[moved], miura[moved], atol=1e-12)
@@ -264,7 +266,7 @@ def test_a_coarser_design_of_another_miura_or_that_does_not_march_is_refused(
         raise rq.BoundaryDataError("alpha at vertex (3, 1) out of range", vertex=(3, 1),
                                    value=4.0)
 
-    monkeypatch.setattr(design, "refine", broken)
+    monkeypatch.setattr(design.problem, "refine", broken)
     with pytest.raises(rq.InputError, match="carried to 40 x 40, does not march: alpha"):
         replace(prob, panels=(40, 40)).carried(coarse)
 
@@ -332,11 +334,12 @@ def test_gauss_newton_hessian_is_jtj_and_solves_a_small_design(transcription):
 
 
 def test_gauss_newton_hands_over_to_the_exact_hessian_unless_it_is_done():
-    phases = small("sphere_cap", hessian="gauss-newton")[1].ipopt_phases
-    n = design.GAUSS_NEWTON_ITERATIONS
+    options = small("sphere_cap", hessian="gauss-newton")[1]
+    phases = lambda done: ipopt.phases(options, done)  # noqa: E731
+    n = ipopt.GAUSS_NEWTON_ITERATIONS
     assert phases(0) == [("gauss-newton", n), ("exact", 1000 - n)]
     assert phases(1000 - n + 5) == [("gauss-newton", n - 5)]
-    assert small("sphere_cap", hessian="exact")[1].ipopt_phases(10) == [("exact", 990)]
+    assert ipopt.phases(small("sphere_cap", hessian="exact")[1], 10) == [("exact", 990)]
     # To IPOPT's tolerance: Gauss-Newton first, then the exact Hessian to the same optimum.
     exact = solve(*small("quarter_vase", hessian="exact"))
     both = solve(*small("quarter_vase", hessian="gauss-newton"))
@@ -761,7 +764,7 @@ def test_render_and_view_draw_the_kept_target(callable_solved):
 
     _, _, result, _, folder = callable_solved
     back = DesignResult.load(folder)
-    mesh = cli._target_for_render(back)
+    mesh = cli.result_files.target_for_render(back)
     n = design.TARGET_GRID
     assert mesh.vertices.shape == (n * n, 3) and len(mesh.faces) == 2 * (n - 1) ** 2
     # in the pattern frame: moved back by the alignment, the grid is the kept target

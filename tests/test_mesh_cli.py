@@ -13,7 +13,7 @@ import trimesh
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp.design import problem as design
+from rffqm_nlp import design
 from rffqm_nlp.show import pictures as viz
 from rffqm_nlp.cli import app
 

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 import rffqm_nlp as rq
-from rffqm_nlp.design import results
+from rffqm_nlp.design import checks, results
 from rffqm_nlp.cli import app
 from rffqm_nlp.design.results import DesignResult, Fit, SolveStats
 
@@ -311,18 +311,18 @@ def test_a_result_whose_re_march_overflows_is_refused(tmp_path):
 
 
 def test_check_numbers_names_the_place_and_never_the_content():
-    results.check_numbers({"a": [1, 2.5, "text", None, True], "b": {"c": 10**300}}, "f.json")
+    checks.check_numbers({"a": [1, 2.5, "text", None, True], "b": {"c": 10**300}}, "f.json")
     with pytest.raises(rq.InputError, match=r"^f\.json: b\.c holds NaN or inf \(at b\.c\[1\]\)"):
-        results.check_numbers({"a": [1.0], "b": {"c": [0.0, float("-inf")]}}, "f.json")
+        checks.check_numbers({"a": [1.0], "b": {"c": [0.0, float("-inf")]}}, "f.json")
     with pytest.raises(rq.InputError, match=r"\(a name of 5000 characters\) holds a whole "
                                             "number of 400 digits"):
-        results.check_numbers({"Q" * 5000: int("9" * 400)}, "f.json")
+        checks.check_numbers({"Q" * 5000: int("9" * 400)}, "f.json")
     with pytest.raises(rq.InputError, match=r"x holds NaN or inf \(at x\[1\]\[0\]\)"):
-        results.check_numbers({"x": np.array([[0.0, 1.0], [np.nan, 2.0]])}, "f.json")
+        checks.check_numbers({"x": np.array([[0.0, 1.0], [np.nan, 2.0]])}, "f.json")
     deep = current = []
     for _ in range(5000):                     # deeper than Python's recursion limit
         current.append([])
         current = current[0]
     current.append(float("nan"))
     with pytest.raises(rq.InputError, match="the value holds NaN or inf"):
-        results.check_numbers(deep, "f.json")
+        checks.check_numbers(deep, "f.json")

@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..files import describe_value, jsonable, read_json, write_json
 from ..model.marching import fold, fold_angles
 from ..model.pattern import Pattern, check_fold_angle, check_omega, motion_omegas
-from ..design.results import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
+from ..design.checks import PATTERN_KEYS, REMARCH_RTOL, check_numbers, checked_pattern
 
 CREATOR = "rffqm-nlp"
 PREFIX = "rffqm:"
@@ -364,9 +364,9 @@ def read_fold(path: str | os.PathLike) -> tuple[Pattern, float, dict]:
     ``metadata`` holds the ``rffqm:`` keys of the file other than omega, pattern and
     version, without the prefix. The design data are checked as a saved result's are:
     no number anywhere NaN, infinite or too large for a float
-    (:func:`rffqm_nlp.design.results.check_numbers`), ``rffqm:pattern`` admissible and equal to
+    (:func:`rffqm_nlp.design.checks.check_numbers`), ``rffqm:pattern`` admissible and equal to
     its boundary data re-marched with the NumPy model
-    (:func:`rffqm_nlp.design.results.checked_pattern`), ``rffqm:omega`` in [-pi, pi], and the
+    (:func:`rffqm_nlp.design.checks.checked_pattern`), ``rffqm:omega`` in [-pi, pi], and the
     flat coordinates those of the pattern. Raises :class:`InputError` (one line, never
     quoting the file's content) for a file that is not valid JSON (or no regular file: a
     folder, a FIFO, a device), not a FOLD file, not written by this package, or whose

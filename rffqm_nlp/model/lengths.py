@@ -130,19 +130,12 @@ def length_maps(bd: BoundaryData) -> LengthMaps:
 
 
 # --------------------------------------------------------------------------- memory
-#: Bytes per unit of N M (N + M) (the dense maps: every side by the boundary lengths) that
-#: each program holds at its peak, on top of :data:`rffqm_nlp.memory.BASE`: "lp" HiGHS'
-#: LPs (:func:`side_length_lp` and the max-min of :func:`side_length_nlp`), "nlp" IPOPT's
-#: "uniform" NLP; fitted to the peaks in docs/solvers.md ("Memory estimate")
-MEMORY_PER_UNIT = {"lp": 230.0, "nlp": 1500.0}
-
-
 def memory_estimate(N: int, M: int, program: str) -> float:
     """Bytes that a side-length ``program`` ("lp": HiGHS' LPs, "nlp": IPOPT's "uniform"
-    NLP) needs for N x M panels: memory.BASE + MEMORY_PER_UNIT[program] N M (N + M)."""
+    NLP) needs for N x M panels (:func:`rffqm_nlp.memory.lengths_estimate`)."""
     N, M = check_size(N, M)
     program = check_value(program, _PROGRAM, "program")
-    return memory.BASE + MEMORY_PER_UNIT[program] * float(N) * M * (N + M)
+    return memory.lengths_estimate(N, M, program)
 
 
 def check_memory(bd: BoundaryData, program: str, name: str) -> None:

@@ -102,6 +102,7 @@ change to one is made in its own module.
 """
 
 from .gram import BANDS
+from .interface import solve
 from .loop import (CORRECTIONS, DOMAIN_DAMPING, MAX_DAMPING, METRIC_DAMPING, RESTORED,
                    SUCCESS, TOWARD_REFERENCE, Outcome, admissible_toward, levenberg_marquardt)
 from .manifold import FEASIBLE, Manifold, boundary_basis
@@ -111,4 +112,4 @@ from .window import CHUNK_ROWS, WHOLE_S
 __all__ = ["BANDS", "CHUNK_ROWS", "CORRECTIONS", "DOMAIN_DAMPING", "FEASIBLE", "MAX_DAMPING",
            "METRIC_DAMPING", "RESTORED", "SECANT_PAIRS", "SUCCESS", "TOWARD_REFERENCE",
            "WHOLE_S", "Manifold", "Outcome", "admissible_toward", "boundary_basis",
-           "levenberg_marquardt"]
+           "levenberg_marquardt", "solve"]
