@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 
 import numpy as np
 import pytest
@@ -390,6 +391,9 @@ def test_final_check_fails_on_fig_random(seed):
     with pytest.raises(MarchingError) as err:
         march(bd)
     assert (err.value.check, err.value.panel) == ("final", panel)
+    # the lengths as plain numbers, not NumPy's repr of a scalar ("np.float64(...)")
+    assert re.search(r"l_cd = -?[0-9.e+-]+, l_bd = -?[0-9.e+-]+", str(err.value))
+    assert "np." not in str(err.value)
 
 
 # --------------------------------------------------------------------------- API

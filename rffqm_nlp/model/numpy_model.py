@@ -239,9 +239,9 @@ def _raise_first_failure(code, mu, asum, lv, lh):
     p, q = divmod(int(np.flatnonzero(code)[0]), code.shape[1])
     check = _CHECKS[code[p, q] - 1]
     detail = {
-        "first": f"2*pi - (alpha_a + alpha_b + alpha_c) = {2 * np.pi - asum[p, q]!r}",
-        "second": f"mu_abc = {mu[p, q]!r}",
-        "final": f"l_cd = {lv[p, q + 1]!r}, l_bd = {lh[p + 1, q]!r}",
+        "first": f"2*pi - (alpha_a + alpha_b + alpha_c) = {float(2 * np.pi - asum[p, q])!r}",
+        "second": f"mu_abc = {float(mu[p, q])!r}",
+        "final": f"l_cd = {float(lv[p, q + 1])!r}, l_bd = {float(lh[p + 1, q])!r}",
     }[check]
     raise MarchingError(check, (p + 1, q + 1), detail)
 
