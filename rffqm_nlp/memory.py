@@ -6,7 +6,7 @@ estimate: the design solve (:func:`design_estimate`, used by
 :func:`rffqm_nlp.design.check_memory`), the side-length programs (:func:`lengths_estimate`,
 used by :func:`rffqm_nlp.model.lengths.check_memory`) and the commands ``rffqm march``,
 ``fold`` and ``render``. Each estimate is a model fitted, from above, to peaks measured on
-this project's machines (docs/solvers.md, "Memory model").
+this project's machines (docs/decisions/memory.md, docs/benchmarks/march_memory.md).
 """
 
 from __future__ import annotations
@@ -68,16 +68,16 @@ def refuse_beyond(need: float, what: str, remedy: str) -> None:
 
 # --------------------------------------------------------------------------- estimates
 #: Bytes ``rffqm march`` and ``fold`` hold besides their data: Python, NumPy, SciPy and the
-#: package as the command imports them, with a margin (studies/results/march_memory.md).
+#: package as the command imports them, with a margin (docs/benchmarks/march_memory.md).
 COMMAND_BASE = 200e6
 #: Bytes ``rffqm march`` holds at its peak per panel (the march, the fold and their JSON;
 #: ``fold`` re-marches the result it reads), and per vertex and state of ``--frames`` (the
 #: states as arrays, lists and JSON text), on top of :data:`COMMAND_BASE`: upper bounds,
-#: with a margin, of the peaks measured (studies/results/march_memory.md).
+#: with a margin, of the peaks measured (docs/benchmarks/march_memory.md).
 PER_PANEL, PER_STATE = 2600.0, 450.0
 #: Bytes ``rffqm render`` holds besides its states and frames (pyvista and VTK too), and
 #: per pixel of each frame of folding.gif (the screenshot, its copy in the stack of frames,
-#: the encoder's work): upper bounds with a margin (studies/results/march_memory.md).
+#: the encoder's work): upper bounds with a margin (docs/benchmarks/march_memory.md).
 RENDER_BASE, GIF_PER_PIXEL = 600e6, 14.0
 
 

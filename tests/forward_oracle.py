@@ -2,7 +2,7 @@
 
 Scalar ``math`` for every angle and length, one 3x3 NumPy matrix per panel, panels in the
 paper's order (1,1), ..., (1,M), (2,1), ..., (N,M). The tests hold
-:mod:`rffqm_nlp.model.numpy_model` against it, and studies/bench_forward.py times it as the
+:mod:`rffqm_nlp.model.numpy_model` against it, and benchmarks/forward.py times it as the
 baseline; the flat pattern follows the stable accumulated-direction construction of
 docs/paper.md s.4, not the printed recursion. It trusts its inputs (boundary data of
 :class:`rffqm_nlp.BoundaryData`, omega in [-pi, pi]).

@@ -364,7 +364,7 @@ def test_the_march_command_refuses_a_pattern_it_cannot_hold(tmp_path, monkeypatc
 
 
 def test_the_side_length_memory_model_matches_the_measured_peaks():
-    """lengths.MEMORY_PER_UNIT (2026-12-02, docs/solvers.md): HiGHS' LP of eq:linearP
+    """memory.LENGTHS_PER_UNIT (2026-12-02, docs/decisions/memory.md): HiGHS' LP of eq:linearP
     peaked at 0.55 and 3.5 GB at 100 and 200 panels a side, its max-min LP at 0.58 and 1.71
     GB at 100 and 150, IPOPT's "uniform" NLP at 0.45 and 1.17 GB at 50 and 70."""
     gb = lambda n, program: lengths.memory_estimate(n, n, program) / 1e9  # noqa: E731
@@ -377,7 +377,7 @@ def test_the_side_length_memory_model_matches_the_measured_peaks():
 
 
 def test_memory_model_matches_the_measured_peaks():
-    """docs/solvers.md: Levenberg-Marquardt in the whole design 0.39 and 1.08 GB at 100 and
+    """docs/decisions/memory.md: Levenberg-Marquardt in the whole design 0.39 and 1.08 GB at 100 and
     200 panels a side with the target lattice fixed, 0.39, 1.13, 2.04 and 5.40 GB at 100,
     200, 300 and 500 with the free correspondence (2026-12-03), IPOPT (simultaneous) 2.1 GB
     at 100 x 100 and 6.9-7.4 GB at 200 x 200."""

@@ -348,7 +348,7 @@ def test_march_refuses_a_pattern_this_machine_cannot_hold(tmp_path, monkeypatch,
     assert list(tmp_path.iterdir()) == []
 
 
-#: Peaks of `rffqm march` measured 2026-12-07 (studies/results/march_memory.md): (rows =
+#: Peaks of `rffqm march` measured 2026-12-07 (docs/benchmarks/march_memory.md): (rows =
 #: cols, frames, GB).
 MARCH_PEAKS = [(1, 0, 0.147), (200, 0, 0.206), (400, 0, 0.367), (800, 0, 0.997),
                (1000, 0, 1.654), (1200, 0, 2.926), (1600, 0, 4.067), (1, 1000, 0.148),

@@ -29,8 +29,8 @@ PROBLEM_FIELDS = set(DesignProblem.__dataclass_fields__)
 
 
 def small(name: str, **kw) -> tuple[DesignProblem, SolveOptions]:
-    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt": tests/test_levenberg_marquardt.py);
-    ``kw`` sets DesignProblem and SolveOptions fields."""
+    """The 8 x 8 target with IPOPT (solver "levenberg-marquardt":
+    tests/test_levenberg_marquardt.py); ``kw`` sets DesignProblem and SolveOptions fields."""
     problem, options = rq.load_design(f"targets/{name}.toml")
     return (replace(problem, **{"panels": (8, 8), **{k: v for k, v in kw.items()
                                                      if k in PROBLEM_FIELDS}}),

@@ -195,9 +195,10 @@ def test_uniform_on_miura_gives_equal_sides(layout, a, b):
 
 def test_max_min_where_ipopt_failed_is_certified_by_the_dual_lp():
     """100 x 100 perturbed Miura angles, where the max-min LP solved with IPOPT stopped with
-    Restoration_Failed (2026-12-02; docs/solvers.md, "Side lengths"): the marched pattern's
-    smallest side over its mean is t*, and the dual LP, min lam s.t. A' y = lam mean_row,
-    sum(y) = 1, y >= 0, attains it (strong duality: no larger t exists)."""
+    Restoration_Failed (2026-12-02; docs/decisions/memory.md, "Side lengths: the max-min LP
+    with HiGHS"): the marched pattern's smallest side over its mean is t*, and the dual LP,
+    min lam s.t. A' y = lam mean_row, sum(y) = 1, y >= 0, attains it (strong duality: no
+    larger t exists)."""
     bd = rq.perturb_angles(rq.miura_boundary(100, 100), 0.02, seed=0)
     sol = side_length_nlp(bd, "max_min", min_length=1e-6)
     sides = march(sol.boundary).side_lengths

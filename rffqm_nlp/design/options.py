@@ -24,7 +24,7 @@ IPOPT_FIELDS = {"max_iter": "SolveOptions.max_iter", "tol": "SolveOptions.tol",
                 "hessian_approximation": "SolveOptions.hessian",
                 "print_level": "solve(verbose=...)"}
 #: SolveOptions.boundary_knots' default: knots per class of boundary data of the coarse
-#: basis in which Levenberg-Marquardt starts (docs/solvers.md)
+#: basis in which Levenberg-Marquardt starts (docs/decisions/levenberg-marquardt.md)
 BOUNDARY_KNOTS = 32
 #: Most starts of a multistart solve and most stages of a continuation: each is a whole
 #: solve (a study of many designs is a sweep, docs/sweeps.md).

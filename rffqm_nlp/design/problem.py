@@ -74,7 +74,7 @@ class DesignProblem:
     * ``layout``, ``alpha0``, ``omega0``: the starting Miura-ori (docs/paper.md); its side
       lengths are chosen so that its coarse lattice at ``omega0`` has the target lattice's
       mean spacings. The default layout "zigzag_i" (zig-zag along the target's u) needs far
-      fewer iterations than "zigzag_j" on the bundled targets (docs/solvers.md);
+      fewer iterations than "zigzag_j" on the bundled targets (docs/decisions/design-problem.md);
     * ``min_angle``: every sector angle in [min_angle, pi - min_angle] (this also keeps the
       first check, eq:firstCheck, away from its limits);
     * ``mu_margin``: |mu_abc| of every panel stays on its starting side of 1 by this margin

@@ -5,8 +5,9 @@ is a list of :class:`Stencil`: one small CasADi Function applied to many instanc
 g[rows[i]] = function(x[columns[i]], params[i]). Its Jacobian (:class:`LocalJacobian`) is
 the small Function's Jacobian, mapped over the instances and scattered by the index arrays:
 built in time and memory that grow like the number of instances, where CasADi's Jacobian of
-the whole expression graph grows faster (docs/solvers.md, "g's Jacobian from local
-stencils"). Rows whose derivatives are constant (linear rows) are given as triplets.
+the whole expression graph grows faster (docs/decisions/large-patterns.md, "g's and r's
+Jacobians from local stencils"). Rows whose derivatives are constant (linear rows) are
+given as triplets.
 """
 
 from __future__ import annotations

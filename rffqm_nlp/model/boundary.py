@@ -280,7 +280,7 @@ def refine(design: BoundaryData, reference: BoundaryData,
            finer: BoundaryData) -> BoundaryData:
     """The boundary data of the Miura-ori ``finer`` carrying ``design``, a pattern designed
     from the Miura-ori ``reference`` of its own size, N x M panels, to finer's N_f x M_f
-    (N_f >= N, M_f >= M; coarse-to-fine, docs/solvers.md).
+    (N_f >= N, M_f >= M; coarse-to-fine, docs/solvers.md, "Coarse-to-fine").
 
     Along each edge, each class (alpha, beta or the sides; one parity of the index, as a
     Miura-ori alternates) is interpolated linearly at the same place along the edge (vertex
@@ -288,7 +288,8 @@ def refine(design: BoundaryData, reference: BoundaryData,
     the ratio of the panels along that edge (N / N_f on the left edge, M / M_f on the bottom
     one), the sides as ratios to ``reference``'s; the mountain-valley signs are finer's.
     Unscaled deviations add up over r times the panels and do not march; scaled, the start
-    lies closest to the coarse design's shape among the factors measured in docs/solvers.md.
+    lies closest to the coarse design's shape among the factors measured in
+    docs/decisions/scaling.md.
     Raises :class:`InputError` unless both Miuras have design's layout and finer is at least
     as large, :class:`BoundaryDataError` where a carried vertex leaves the admissible set.
     """

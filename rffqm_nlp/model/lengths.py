@@ -15,7 +15,7 @@ those linear maps. Two ways to choose ell over the same feasible set
 
   - ``"max_min"``: maximise t subject to s >= t, an LP solved with HiGHS (as
     :func:`side_length_lp`; IPOPT, which solved it before, stopped with Restoration_Failed
-    on larger perturbed patterns that HiGHS solves: docs/solvers.md, "Side lengths: the
+    on larger perturbed patterns that HiGHS solves: docs/decisions/memory.md, "Side lengths: the
     max-min LP with HiGHS"). Its optimum t* decides feasibility: no pattern with every
     side >= min_length (times the mean) exists iff t* < min_length, and no valid pattern
     at all iff t* <= 0.

@@ -69,8 +69,8 @@ def one_thread() -> AbstractContextManager:
     it, silently when it already is) so that the library is found.
 
     The thread count of that OpenBLAS changes IPOPT's path in the last digits (iterations
-    and fit, docs/solvers.md), so without the limit a serial run would not reproduce a
-    cluster run's table.
+    and fit, docs/decisions/large-patterns.md), so without the limit a serial run would not
+    reproduce a cluster run's table.
     """
     import casadi
 

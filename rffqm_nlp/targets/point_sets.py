@@ -67,7 +67,7 @@ def point_set_diameter(points: np.ndarray) -> float:
     bound d; with c the bounding-box centre and R the largest |p - c|, a point p can only be
     in a pair longer than d if |p - c| + R >= d, and the pairs of those points are compared
     in blocks. On a convex cap every sampled point is a hull vertex, so the pruning is what
-    keeps it fast (measured against all pairs: docs/solvers.md, "Smaller measurements").
+    keeps it fast (measured against all pairs: docs/decisions/smaller.md).
     Raises :class:`InputError` unless the points are finite numbers of shape (..., 3).
     """
     pts = finite_array(points, "points", allowed="a finite array of shape (..., 3)")

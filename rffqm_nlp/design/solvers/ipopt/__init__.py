@@ -30,7 +30,7 @@ SX_MAX_PANELS = 144
 #: pi/2, long sides): the simultaneous transcription loses feasibility there and never
 #: recovers, the sequential one needs more iterations. "adaptive" suits the simultaneous
 #: NLP; for the sequential one it found a worse local minimum of a small sphere cap, which
-#: a small mu_init does not (docs/solvers.md).
+#: a small mu_init does not (docs/decisions/ipopt.md).
 COLD_BARRIER = {"sequential": {"ipopt.mu_init": 1e-3},
                 "simultaneous": {"ipopt.mu_strategy": "adaptive"}}
 #: Most iterations of the damped Gauss-Newton Hessian before the exact one takes over (see
@@ -63,7 +63,7 @@ def expand(options: SolveOptions, panels: tuple[int, int]) -> bool:
     The sequential NLP is dense: its SX Hessian's build grows fast with the pattern, so
     only patterns up to :data:`SX_MAX_PANELS` panels are expanded. The simultaneous
     NLP's time goes to the linear solver, not to evaluations, so it stays MX
-    (docs/solvers.md).
+    (docs/decisions/ipopt.md).
     """
     return options.transcription == "sequential" and panels[0] * panels[1] <= SX_MAX_PANELS
 

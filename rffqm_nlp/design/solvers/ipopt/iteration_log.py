@@ -20,7 +20,7 @@ class IterationLog(ca.Callback):
     and the NLP can project it (``nlp.project``: the simultaneous transcription re-marches
     the iterate's boundary data), the projected point is judged instead, with its own
     objective: the simultaneous NLP meets its marching equations only near the optimum, but
-    its earlier iterates' designs are often admissible and good (docs/solvers.md).
+    its earlier iterates' designs are often admissible and good (docs/decisions/ipopt.md).
     """
 
     #: constraint violation below which an iterate counts as feasible for ``stop``

@@ -30,9 +30,9 @@ class Sums:
     r] (n_m marching columns, n_f free ones: ``Jf``, (n_r, n_f), J's free columns, in which
     S is zero; r (n_r,)), which holds J' J and J' r, and the metric's over the marching
     columns: one syrk each and no products of their own (with two OpenBLAS threads, separate
-    products slowed the whole solve down: docs/solvers.md). In the residuals' Gram matrix
-    the n_f + 1 columns of J_f and r sit at the corner's column ``mid``, inside every
-    row's range of columns (:class:`.window.Window`)."""
+    products slowed the whole solve down: docs/decisions/large-patterns.md). In the
+    residuals' Gram matrix the n_f + 1 columns of J_f and r sit at the corner's column
+    ``mid``, inside every row's range of columns (:class:`.window.Window`)."""
 
     def __init__(self, n_m: int, mid: int, Jf: np.ndarray, r: np.ndarray):
         self.Jf, self.r, self.mid = Jf, r[:, None], mid

@@ -23,12 +23,13 @@ CORRECTIONS = 3
 #: factor of lam after a step that leaves the march's domain (a side or sector angle of
 #: the re-marched pattern out of its range): unlike a step whose loss rises, it says
 #: nothing of the model's quality, so Nielsen's growing factor is not applied; the first
-#: step from a large Miura start leaves it for several lam (docs/solvers.md)
+#: step from a large Miura start leaves it for several lam (docs/decisions/scaling.md)
 DOMAIN_DAMPING = 2.0
 #: damping above which no step is found: the run stops with status "Stalled"
 MAX_DAMPING = 1e10
 #: damping below which a linearisation keeps the last metric M instead of computing it
-#: (docs/solvers.md: the same iterations, within one or two, on the bundled targets)
+#: (docs/decisions/levenberg-marquardt.md: the same iterations, within one or two, on the
+#: bundled targets)
 METRIC_DAMPING = 1e-3
 #: the fractions of the way from an inadmissible start's boundary data to the reference's
 #: tried in turn (:func:`admissible_toward`)

@@ -159,7 +159,7 @@ class Manifold:
         problem, :data:`.window.WHOLE_S`); nothing otherwise. The dense products are then
         too small to share, and OpenBLAS's threads, woken by a product with S, slowed the
         next small LAPACK call (a Cholesky factor of the model) down many times over
-        (measured in docs/solvers.md)."""
+        (measured in docs/decisions/large-patterns.md)."""
         if not self.window.whole:
             return nullcontext()
         return _blas().limit(limits=1, user_api="blas")
@@ -292,7 +292,8 @@ def boundary_basis(klass: np.ndarray, position: np.ndarray, knots: int
     in its index between ``knots`` knots spread evenly from its first entry to its last
     (a coordinate per knot: its entry's value); every other design variable is its own
     coordinate. A pattern far finer than the target's features then keeps the step's
-    dense matrices at (12 knots + the rest)^2 instead of n_d^2 (docs/solvers.md)."""
+    dense matrices at (12 knots + the rest)^2 instead of n_d^2
+    (docs/decisions/levenberg-marquardt.md)."""
     if knots < 2:
         raise InputError(f"boundary knots must be at least 2, got {knots}")
     rows, cols, values, at = [], [], [], []

@@ -13,7 +13,7 @@ from .steps import Model, Step, Steps
 
 #: the accepted steps whose secant pairs make up B: NL2SOL's update applied to each in turn
 #: from zero at every iteration, so curvature learned far back is dropped instead of being
-#: sized away with what the last steps learned (docs/solvers.md)
+#: sized away with what the last steps learned (docs/decisions/levenberg-marquardt.md)
 SECANT_PAIRS = 3
 
 

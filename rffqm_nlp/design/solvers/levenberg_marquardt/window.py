@@ -13,7 +13,8 @@ from .gram import Sums, bands
 from .levels import Levels
 
 #: entries (state x marching design) of S up to which the pass keeps it whole (8 MB, which
-#: stays in the cache: its products are then cheaper than the sweeps; docs/solvers.md)
+#: stays in the cache: its products are then cheaper than the sweeps;
+#: docs/decisions/large-patterns.md)
 WHOLE_S = 1 << 20
 #: rows of a level computed at once in the pass (:class:`Window`): their product with
 #: the working set, CHUNK_ROWS x n_u, is the pass's largest temporary
