@@ -138,10 +138,10 @@ def solve_in_child(target: str, n: int, design: dict | None = None, solve: dict 
 # ------------------------------------------------------------------ tables and pages
 def machine() -> str:
     """The machine: architecture, CPUs and their model, memory, operating system, versions."""
-    model = next((line.split(":", 1)[1].strip() for line in
-                  Path("/proc/cpuinfo").read_text().splitlines()
-                  if line.startswith("model name")), "?") if Path("/proc/cpuinfo").exists() \
-        else "?"
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
+    model = next((line.split(":", 1)[1].strip() for line in lines
+                  if line.startswith("model name")), "?")
     memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
     return (f"{platform.machine()}, {os.cpu_count()} CPUs ({model}), {memory:.0f} GB; "
             f"{platform.platform()}; Python {platform.python_version()}, NumPy "
