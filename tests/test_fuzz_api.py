@@ -265,6 +265,9 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     # backend
     "backend.is_casadi": (backend.is_casadi, dict(args=1.0)),
     "backend.math_for": (backend.math_for, dict(args=1.0)),
+    "surfaces.mathlib": (surfaces.mathlib, dict(args=1.0)),
+    "surfaces.Mesh": (surfaces.Mesh, dict(source=CAP.mesh(9, 9), name="cap", knots=None,
+                                          smoothing=None)),
     "backend.finite_array": (backend.finite_array, dict(value=[1.0, 2.0], name="x")),
     "backend.check_formula_args": (backend.check_formula_args, dict(alpha=1.0, sigma=1.0)),
     "backend.finite_result": (backend.finite_result, dict(value=np.ones(3), what="x")),
@@ -281,7 +284,7 @@ NO_ARGUMENTS = {"surfaces.names": surfaces.names, "marching.panel_cell": marchin
 UNCHECKED_RESULTS = {"marching.evaluate", "marching.Evaluation", "marching.Evaluation.set"}
 #: Examples per call: cheap calls get more, calls that solve or build graphs fewer.
 EXAMPLES = 32
-FEWER = {"lengths.side_length_nlp": 8, "lengths.side_length_lp": 12, "surfaces.Custom": 10,
+FEWER = {"lengths.side_length_nlp": 8, "surfaces.Mesh": 8, "lengths.side_length_lp": 12, "surfaces.Custom": 10,
          "surfaces.get": 12, "surfaces.from_config": 12, "surfaces.Surface": 8,
          "collisions.collisions": 12, "clearance.closest": 12, "clearance.constrain": 8,
          "curvature.curvature_maps": 12, "shape.shape_fit": 10, "shape.surface_area": 10,
@@ -385,8 +388,9 @@ def call(name: str, fn: Callable, kwargs: dict[str, Any]) -> None:
 
 
 def _positional(name: str, kwargs: dict[str, Any]) -> tuple[tuple, dict[str, Any]]:
-    """(args, kwargs) of a call: is_casadi and math_for take their argument positionally."""
-    if name in ("backend.is_casadi", "backend.math_for"):
+    """(args, kwargs) of a call: is_casadi and math_for (mathlib) take their argument
+    positionally."""
+    if name in ("backend.is_casadi", "backend.math_for", "surfaces.mathlib"):
         return (kwargs["args"],), {}
     return (), kwargs
 
@@ -445,11 +449,17 @@ def test_bad_calls_raise_library_errors_or_return_finite_results(name):
 
 
 def _public(module) -> set[str]:
-    """The public functions and classes defined in ``module`` (``<module>.<name>``)."""
+    """The public functions and classes of ``module`` (``<module>.<name>``): those its
+    ``__all__`` lists (a public face that gathers its folder's pieces), else those defined
+    in it."""
     short = module.__name__.rsplit(".", 1)[1]
-    return {f"{short}.{name}" for name, obj in vars(module).items()
-            if not name.startswith("_") and getattr(obj, "__module__", None) == module.__name__
-            and (inspect.isfunction(obj) or inspect.isclass(obj))}
+    names = getattr(module, "__all__", None)
+    if names is None:
+        names = [name for name, obj in vars(module).items()
+                 if getattr(obj, "__module__", None) == module.__name__]
+    return {f"{short}.{name}" for name in names if not name.startswith("_")
+            and (inspect.isfunction(getattr(module, name))
+                 or inspect.isclass(getattr(module, name)))}
 
 
 def test_every_public_callable_is_fuzzed():

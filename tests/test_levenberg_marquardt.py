@@ -753,7 +753,7 @@ def test_a_solver_ending_in_nan_raises_solver_failed_never_a_result(monkeypatch)
     prob, opts = small("sphere_cap", stop_rms=0.05)
 
     def nan_run(man, x, *args, **kw):  # the run in the manifold's basis
-        return loop.Outcome(x=np.full_like(x, np.nan), objective=float("nan"),
+        return loop.MarchedOutcome(x=np.full_like(x, np.nan), objective=float("nan"),
                             iterations=1, status="Fit_Reached")
 
     monkeypatch.setattr(loop, "run", nan_run)

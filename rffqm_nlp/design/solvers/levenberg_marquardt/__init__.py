@@ -95,7 +95,7 @@ The modules, from the bottom up:
   points, their derivatives), :func:`boundary_basis`, BLAS's threads;
 * :mod:`.steps`: the model, the constrained step and its QP, the optimality error;
 * :mod:`.secant`: the structured secant term B and the last step's record;
-* :mod:`.loop`: :func:`levenberg_marquardt`, :func:`admissible_toward`, :class:`Outcome`.
+* :mod:`.loop`: :func:`levenberg_marquardt`, :func:`admissible_toward`, :class:`MarchedOutcome`.
 
 The constants below are re-exported to be read; each is used where it is defined, so a
 change to one is made in its own module.
@@ -104,12 +104,13 @@ change to one is made in its own module.
 from .gram import BANDS
 from .interface import solve
 from .loop import (CORRECTIONS, DOMAIN_DAMPING, MAX_DAMPING, METRIC_DAMPING, RESTORED,
-                   SUCCESS, TOWARD_REFERENCE, Outcome, admissible_toward, levenberg_marquardt)
+                   SUCCESS, TOWARD_REFERENCE, MarchedOutcome, admissible_toward,
+                   levenberg_marquardt)
 from .manifold import FEASIBLE, Manifold, boundary_basis
 from .secant import SECANT_PAIRS
 from .window import CHUNK_ROWS, WHOLE_S
 
 __all__ = ["BANDS", "CHUNK_ROWS", "CORRECTIONS", "DOMAIN_DAMPING", "FEASIBLE", "MAX_DAMPING",
            "METRIC_DAMPING", "RESTORED", "SECANT_PAIRS", "SUCCESS", "TOWARD_REFERENCE",
-           "WHOLE_S", "Manifold", "Outcome", "admissible_toward", "boundary_basis",
+           "WHOLE_S", "Manifold", "MarchedOutcome", "admissible_toward", "boundary_basis",
            "levenberg_marquardt", "solve"]

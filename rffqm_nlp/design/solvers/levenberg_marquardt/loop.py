@@ -2,7 +2,7 @@
 (a start moved toward the reference where it is not admissible, :func:`admissible_toward`;
 the coarse basis first, then the whole design), the iterations of one run in one basis
 (:func:`run`: restoration, then admissible steps with Nielsen's damping), and where a run
-ends (:class:`Outcome`)."""
+ends (:class:`MarchedOutcome`)."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ SUCCESS = ("Solve_Succeeded", "Fit_Reached")
 
 
 @dataclass
-class Outcome:
+class MarchedOutcome:
     """Where a run ended: ``x`` (a marched design, admissible), its loss, the number of
     accepted steps, the status and the optimality error (:func:`.steps.kkt_error`, scaled) at
     the last point tested (None when none was). Statuses: "Solve_Succeeded" (first-order
@@ -77,7 +77,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
                         stop: Callable[[np.ndarray], bool] | None = None,
                         callback: Callable[[float, float], None] | None = None,
                         tol: float = 1e-6, manifold: Manifold | None = None,
-                        reference: Callable[[], np.ndarray] | None = None) -> Outcome:
+                        reference: Callable[[], np.ndarray] | None = None) -> MarchedOutcome:
     """Minimise the simultaneous NLP's loss over marched designs, from x (re-marched first),
     to first-order optimality (status "Solve_Succeeded", see the package docstring).
 
@@ -87,9 +87,9 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     error; ``manifold``: ``Manifold(nlp)`` built beforehand (it holds the derivatives' build);
     ``reference``: gives an admissible point (n,), called only where x is not admissible:
     the run then starts from x's boundary data moved toward the reference's
-    (:func:`admissible_toward`, ``Outcome.moved``) where a fraction of
+    (:func:`admissible_toward`, ``MarchedOutcome.moved``) where a fraction of
     :data:`TOWARD_REFERENCE` is admissible. Otherwise a start that marches but breaks a
-    constraint is restored (package docstring, ``Outcome.restored``); the run ends
+    constraint is restored (package docstring, ``MarchedOutcome.restored``); the run ends
     "Inadmissible_Start" where x does not march or the restoration fails.
 
     With a coarse basis (:attr:`.manifold.Manifold.coarse`) the steps are taken in it first; where
@@ -141,7 +141,7 @@ def admissible_toward(man: Manifold, x: np.ndarray, reference: np.ndarray
 def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: float | None,
         stop: Callable[[np.ndarray], bool] | None,
         callback: Callable[[float, float], None] | None, tol: float, announce: bool = True,
-        scale: float | None = None) -> Outcome:
+        scale: float | None = None) -> MarchedOutcome:
     """One run of :func:`levenberg_marquardt` on ``man``, in its basis (``announce``: the
     callback at the start too; ``scale``: the optimality error's, None: from the first
     gradient), a start that breaks a constraint restored first."""
@@ -149,7 +149,7 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
     x = np.asarray(x, dtype=float)
     p = man.marched(x)
     if p is None:
-        return Outcome(x=x, objective=None, iterations=0, status="Inadmissible_Start")
+        return MarchedOutcome(x=x, objective=None, iterations=0, status="Inadmissible_Start")
     infeasibility = man.violation(p)
     restoring = infeasibility > FEASIBLE
     if callback is not None and announce:
@@ -241,9 +241,9 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
             status = "Fit_Reached"
             break
     if restoring:  # no admissible point reached: the start as given
-        return Outcome(x=x, objective=None, iterations=it, status="Inadmissible_Start",
+        return MarchedOutcome(x=x, objective=None, iterations=it, status="Inadmissible_Start",
                        restored=it)
-    return Outcome(x=p.x, objective=p.objective, iterations=it, status=status,
+    return MarchedOutcome(x=p.x, objective=p.objective, iterations=it, status=status,
                    kkt_error=error, scale=scale, restored=restored)
 
 
