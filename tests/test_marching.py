@@ -6,6 +6,7 @@ import pytest
 from hypothesis import assume, given, strategies as st
 
 import rffqm_nlp as rq
+from rffqm_nlp.model import kinematics
 from rffqm_nlp.model import marching as mg
 from rffqm_nlp.model import numpy_model
 from rffqm_nlp.model import vertex as vx
@@ -467,6 +468,28 @@ def test_graph_builders_take_numbers_and_refuse_mismatched_shapes():
                                       pat.lh, pat.lv[:, :2]), "lv must be 2 x 4")):
         with pytest.raises(rq.InputError, match=words):
             call()
+
+
+def test_folded_vertices_on_numbers_are_the_fold_graphs_values():
+    """The kinematics' folded state on numbers: DMs equal to the values of fold_function
+    and panel_quaternions_function; shapes that do not fit alpha's, a list for omega, SX
+    symbols (the kinematics is MX) and non-numbers are InputErrors."""
+    pat = mg.march(small_perturbed(3, 4, seed=1))
+    args = [pat.alpha, pat.beta, pat.sigma, pat.lh, pat.lv, 0.8]
+    Y, quat = kinematics.folded_vertices(*args)
+    want = mg.evaluate(mg.fold_function(3, 4), args) + mg.evaluate(
+        mg.panel_quaternions_function(3, 4), args)
+    assert [x.shape for x in Y + quat] == [(4, 5)] * 3 + [(3, 4)] * 4
+    for got, value in zip(Y + quat, want):
+        np.testing.assert_allclose(got.full(), value, rtol=0, atol=1e-13)
+    for k, bad, words in ((3, pat.lh[:, :2], r"lh must be 4 x 4 for alpha's 4 x 5 vertices"),
+                          (4, pat.lv.T, "lv must be 3 x 5"),
+                          (1, pat.beta[:, :2], "alpha, beta, sigma must be matrices of one"),
+                          (5, [1.0, 2.0], "omega must be a number"),
+                          (5, ca.SX.sym("w"), "omega must be an MX matrix or numbers"),
+                          (2, "x", "sigma must be")):
+        with pytest.raises(rq.InputError, match=words):
+            kinematics.folded_vertices(*args[:k], bad, *args[k + 1:])
 
 
 def test_vertex_formulas_refuse_poles_on_numbers_and_build_graphs_on_symbols():
