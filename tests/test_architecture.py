@@ -10,7 +10,8 @@ import rffqm_nlp as rq
 
 PACKAGE = Path(rq.__file__).parent
 #: The floors, lowest first: a module may import from its own floor and those below.
-FLOORS = ["ground", "model", "targets", "contact", "design", "io", "show", "sweeps", "cli"]
+FLOORS = ["ground", "model", "targets", "contact", "design", "mechanics", "io", "make", "show",
+          "sweeps", "cli"]
 GROUND = {"errors", "files", "memory", "ipopt_options", "_version"}
 #: Imports that run back up a floor: (importer, imported), each with a comment where it is.
 UPWARD = {("design.results", "show.view")}
