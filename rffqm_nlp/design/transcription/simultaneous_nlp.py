@@ -1,0 +1,227 @@
+"""The simultaneous transcription (:func:`simultaneous`): every vertex angle and side is a
+variable and the marching equations are equality constraints, panel by panel (many
+variables, sparse Jacobians); and its projection of any point onto the marched designs
+(:class:`_Projection`)."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ...errors import InputError
+from ...model import numpy_model
+from ...model import vertex as vx
+from ...model.marching import (Evaluation, locate_failure, marched_function, panel_cell, qmul,
+                               rotated_edges)
+from ...targets import shape
+from .correspondence import with_grid_rows
+from .inputs import Setup, damping_weights
+from .lifting import (MeanTree, crease_quaternion_signs, fold_multipliers_kv,
+                      local_crease_quaternions, sides_by_antidiagonal)
+from .loss import objective_residuals
+from .nlp import NLP, Layout
+from .stencil_jacobians import constraint_jacobian, residual_jacobian
+
+PI = np.pi
+
+
+def simultaneous(setup: Setup) -> NLP:
+    """The simultaneous transcription: every vertex angle, side, edge direction, panel
+    rotation (quaternion) and folded vertex is a variable, and the marching equations are
+    equality constraints, panel by panel. The Jacobians stay sparse, so large patterns fit.
+
+    Pattern: the panel cell (eq:marchingSector .. eq:getSides) maps a, b, c and l_ab, l_ac to
+    d, l_cd, l_bd; the sides are stated multiplied through by the denominator of
+    eq:getSides (:func:`vertex.panel_side_residuals`); with the quotient IPOPT needed far
+    more iterations (docs/decisions/ipopt.md).
+    Kinematics: edge directions accumulate sector angles, panel quaternions multiply by
+    crease quaternions (eq:defGrads), vertices add rotated edges (eq:finalCalc). The loss
+    sees only the coarse lattice, but lifting every vertex keeps large designs converging:
+    with the coarse lattice points alone (a smaller KKT system) a large sphere cap lost
+    feasibility and did not recover (docs/decisions/ipopt.md).
+
+    Every equality row is local (a panel and its neighbours): the column factors of the fold
+    multipliers are lifted (PHI, see :func:`local_crease_quaternions`) and the mean side is
+    the root of a tree of partial means (P, see :class:`MeanTree`), so the Jacobian colours
+    in a few tens of forward sweeps whatever the size. Solve it with ``mu_strategy =
+    adaptive`` (or a small ``mu_init``): with IPOPT's default monotone barrier from mu = 0.1
+    the barrier terms (hundreds of logs against a much smaller loss) pull this
+    infeasible-path method towards square panels and long sides (measured:
+    docs/decisions/ipopt.md, "Cold-start barrier"), where it loses feasibility and never
+    returns.
+    """
+    bd0 = setup.boundary
+    N, M = bd0.N, bd0.M
+    n1, m1 = N + 1, M + 1
+    tree = MeanTree(n1 * M + N * m1, order=sides_by_antidiagonal(N, M))
+    corr = setup.correspondence
+    grid_blocks = {} if corr is None else {"U": corr.shape, "V": corr.shape}
+    lay = Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
+                  "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
+                  "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "PHI": (N - 1, M),
+                  "P": (tree.size, 1), **grid_blocks, "omega": (1, 1), "rigid": (7, 1)})
+    parts = (ca.MX.sym("x", lay.size - 8), ca.MX.sym("x_global", 8))  # omega, rigid
+    x = ca.vertcat(*parts)
+    v = lay.views(x)
+    A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
+    start = numpy_model.march(bd0)
+    S = ca.DM(start.sigma)
+    # Pattern: one panel cell per panel, mapped.
+    cell = panel_cell().map(N * M)
+    row = lambda m: ca.vec(m).T  # noqa: E731 - column-major row of a panel-shaped block
+    xs, ys = cell(ca.vertcat(row(A[1:, :M]), row(B[1:, :M]), row(S[1:, :M]), row(LV[:, :M])),
+                  ca.vertcat(row(A[:N, :M]), row(B[:N, :M]), row(S[:N, :M]),
+                             row(A[:N, 1:]), row(B[:N, 1:]), row(S[:N, 1:]), row(LH[:N, :])))
+    # The sides of d without the quotient (vertex.panel_side_residuals), with the roles of
+    # the panel cell: a = (i, j), b = (i+1, j), c = (i, j+1).
+    sides_res = vx.panel_side_residuals(A[:N, :M], PI - B[1:, :M], B[:N, 1:], LV[:, :M],
+                                        LH[:N, :], LV[:, 1:], LH[1:, :])
+    march_res = ca.vec(ca.vertcat(row(A[1:, 1:]) - xs[0, :], row(B[1:, 1:]) - xs[1, :],
+                                  *(row(r) for r in sides_res)))
+    mu = ys[1, :].T
+    # Kinematics, lifted.
+    th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
+                        ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
+    quat = [v["Qw"], v["Qx"], v["Qy"], v["Qz"]]
+    qv, qh, phi_res = local_crease_quaternions(A, B, start.sigma, TH, omega, v["PHI"])
+    prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
+    prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
+    q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
+                       *(ca.vec(c[1:, :] - p) for c, p in zip(quat, prod_rows)))
+    Y = [v["Yx"], v["Yy"], v["Yz"]]
+    bottom, vertical = rotated_edges(quat, A, TH, LH, LV)
+    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :M] - b) for c, b in zip(Y, bottom)),
+                       *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
+    # Boundary design vector in BoundaryData.to_vector order.
+    bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
+    grid = None if corr is None else (v["U"], v["V"])
+    res = objective_residuals(setup, shape.coarse_grain(Y), v["rigid"], bvec, grid)
+    sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
+    mean_res, mean = tree.residuals(sides, v["P"])
+    sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
+    n_eq = (march_res.numel() + th_res.numel() + phi_res.numel() + q_res.numel()
+            + y_res.numel() + mean_res.numel())
+    nv = N + 1 + M
+    mv, lo_mv, hi_mv = setup.boundary_mv(bvec[:nv], bvec[nv:2 * nv])
+    g = ca.vertcat(march_res, th_res, phi_res, q_res, y_res, mean_res,
+                   sign * (mu ** 2 - 1), mv, sides - setup.min_length * mean)
+    lo_mu, hi_mu = setup.mu_bounds()
+    lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
+    ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
+    if corr is not None:
+        g, lbg, ubg = with_grid_rows(corr, grid, g, lbg, ubg)
+    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
+                                           for n in names])
+    grid_index = block("U", "V") if corr is not None else np.zeros(0, dtype=np.int64)
+    project = _Projection(x, v, lay, start.sigma, tree, grid_index)
+    x0 = project(lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
+                           "omega": setup.omega, "rigid": setup.rigid0()}))
+    if x0 is None:
+        raise RuntimeError("the start does not march with the CasADi graph")
+    if corr is not None:
+        x0[grid_index] = setup.controls0()
+    lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
+    if corr is not None:
+        lbx[grid_index], ubx[grid_index] = corr.bounds()
+    for name in ("A", "B"):
+        lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
+    for name in ("LH", "LV"):
+        lbx[lay.slices[name]] = 1e-9 * setup.spacing
+    lbx[lay.slices["omega"]], ubx[lay.slices["omega"]] = setup.omega_bounds
+    for name in ("TH", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):  # R^{11} = I, y^{11} = 0
+        lbx[lay.index(name, 0, 0)] = ubx[lay.index(name, 0, 0)] = 0.0
+    lbx[lay.index("Qw", 0, 0)] = ubx[lay.index("Qw", 0, 0)] = 1.0
+    groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
+                                       + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
+              "lengths": np.concatenate([lay.index("LV", slice(None), 0),
+                                         lay.index("LH", 0, slice(None))]),
+              "omega": lay.index("omega", 0, 0)}
+    for name in setup.fixed:
+        lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
+    unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
+    folded = ca.Function("folded", [x], Y)
+    position = np.full(lay.size, np.nan)
+    for name in ("A", "B"):
+        position[lay.index(name, slice(None), 0)] = -np.arange(n1)
+        position[lay.index(name, 0, slice(1, None))] = np.arange(1, m1)
+    position[lay.index("LV", slice(None), 0)] = -(np.arange(N) + 0.5)
+    position[lay.index("LH", 0, slice(None))] = np.arange(M) + 0.5
+    boundary_class = np.full(lay.size, -1, dtype=np.int64)
+    for kind, (name, rows, cols, index) in enumerate([
+            ("A", slice(None), 0, np.arange(n1)), ("B", slice(None), 0, np.arange(n1)),
+            ("A", 0, slice(1, None), np.arange(1, m1)), ("B", 0, slice(1, None), np.arange(1, m1)),
+            ("LV", slice(None), 0, np.arange(N)), ("LH", 0, slice(None), np.arange(M))]):
+        boundary_class[lay.index(name, rows, cols)] = 2 * kind + index % 2
+
+    lengths = np.zeros(lay.size, dtype=bool)
+    for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
+        lengths[lay.slices[name]] = True
+    lengths[lay.size - 3:] = True  # the translation of the alignment, last in x
+    weights = damping_weights(setup, lengths)
+    free_target = None
+    if corr is not None:
+        weights[grid_index] = corr.damping_weights()
+        free_target = ca.Function("target", [x], corr.lattice(*grid))
+    design = np.concatenate([*groups.values(), block("rigid"), grid_index])
+    return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
+               unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
+               damping_weights=weights, design_index=design,
+               pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
+               boundary_position=position, boundary_class=boundary_class,
+               grid_index=None if corr is None else grid_index,
+               r_jacobian=residual_jacobian(setup, lay, res.numel()),
+               g_jacobian=constraint_jacobian(setup, lay, start.sigma, tree, g.numel()))
+
+
+
+class _Projection:
+    """The simultaneous NLP's :attr:`NLP.project`: x -> the point of x's boundary data,
+    omega, alignment and controls, marched and folded, through one buffered CasADi Function
+    of x (:func:`marching.marched_function` and the mean tree: the solver's trial points
+    are marched without the NumPy model's Python loop over anti-diagonals, and its answer
+    is re-marched with that model in the end); the lifted fold multiplier angles and the
+    crease quaternions' signs in NumPy.
+
+    None where the march fails a check (:func:`marching.locate_failure`), gives other
+    vertex signs than ``sigma``, the NLP's, or the point is not finite (a NaN or inf in
+    x's omega, alignment or controls). The boundary data are not validated as
+    :class:`BoundaryData` does: the NLP's bounds and rows are stricter (angles within
+    [min_angle, pi - min_angle], sides positive, the boundary MV rows with a margin), and
+    every caller judges the point by them."""
+
+    def __init__(self, x: ca.MX, v: dict, lay: Layout, sigma: np.ndarray, tree: MeanTree,
+                 grid_index: np.ndarray):
+        N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+        S = ca.DM(sigma)
+        A, B, LH, LV = v["A"], v["B"], v["LH"], v["LV"]
+        out = marched_function(N, M)(ca.vertcat(A[:, 0].T, B[:, 0].T, S[:, 0].T),
+                                     ca.vertcat(A[0, 1:], B[0, 1:], S[0, 1:]),
+                                     LV[:, 0].T, LH[0, :], v["omega"])
+        lh, lv = out[3], out[4]
+        nodes = tree.expression(ca.vertcat(ca.vec(lh), ca.vec(lv)))
+        self._marched = Evaluation(ca.Function("project", [x], [*out, nodes]),
+                                   [np.zeros(lay.size)])
+        self._lay, self._sigma, self._keep = lay, sigma, np.concatenate(
+            [np.arange(lay.size)[lay.slices[n]] for n in ("omega", "rigid")] + [grid_index])
+        self._kh0, self._sp = fold_multipliers_kv(sigma)
+
+    def __call__(self, xk: np.ndarray) -> np.ndarray | None:
+        self._marched.set(0, xk)
+        (alpha, beta, sigma, lh, lv, mu, alpha_d, theta,
+         qw, qx, qy, qz, yx, yy, yz, nodes) = self._marched.run()
+        if (locate_failure(alpha_d, mu, lh, lv) is not None
+                or not np.array_equal(sigma, self._sigma)):
+            return None
+        N, M = mu.shape
+        try:
+            mu2 = vx.mu2(alpha, beta, self._sigma)[0, :]
+        except InputError:          # a vertex at the pole of its fold multiplier
+            return None
+        phi = np.arctan((-self._kh0 / mu2 * self._sp)[1:N, :M])
+        signs = crease_quaternion_signs(alpha, beta, self._sigma, phi)
+        out = self._lay.pack({"A": alpha, "B": beta, "LH": lh, "LV": lv, "TH": theta,
+                              "Qw": qw * signs, "Qx": qx * signs, "Qy": qy * signs,
+                              "Qz": qz * signs, "Yx": yx, "Yy": yy, "Yz": yz, "PHI": phi,
+                              "P": nodes})
+        out[self._keep] = xk[self._keep]
+        return out if np.all(np.isfinite(out)) else None
