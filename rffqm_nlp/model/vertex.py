@@ -58,7 +58,7 @@ def mu2_terms(alpha: Scalar, beta: Scalar, sigma: Scalar) -> tuple[Scalar, Scala
 
     Both are smooth and never vanish together for angles in (0, pi), so a quantity
     proportional to mu2 or to 1 / mu2 can be written without a quotient through the points
-    where mu2 is 0 or infinite (see transcription._local_crease_quaternions).
+    where mu2 is 0 or infinite (see transcription.lifting.local_crease_quaternions).
     """
     check_formula_args(alpha=alpha, beta=beta, sigma=sigma)
     return _mu2_terms(*_arrays(alpha, beta, sigma))
