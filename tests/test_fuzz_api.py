@@ -146,6 +146,8 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
         alpha=PAT.alpha, beta=PAT.beta, sigma=PAT.sigma)),
     "marching.crease_quaternion": (marching.crease_quaternion, dict(
         theta=0.3, k=0.5, c=0.9, s=0.4, sign=-1.0, k_den=1.0)),
+    "marching.folded_vertices": (marching.folded_vertices, dict(
+        alpha=PAT.alpha, beta=PAT.beta, sigma=PAT.sigma, lh=PAT.lh, lv=PAT.lv, omega=0.7)),
     "marching.qmul": (marching.qmul, dict(p=(1.0, 0.0, 0.0, 0.0), q=(0.0, 1.0, 0.0, 0.0))),
     "marching.rotate_planar": (marching.rotate_planar, dict(q=(1.0, 0.0, 0.0, 0.0), vx_=1.0,
                                                             vy_=2.0)),

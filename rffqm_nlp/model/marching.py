@@ -33,9 +33,9 @@ from .pattern import (Pattern, check_fold_angle, check_fold_memory, check_folded
 __all__ = ["MU_TOL", "PI", "SIZE_CACHE", "Evaluation", "Quaternion", "boundary_inputs",
            "cached_graphs", "crease_quaternion", "crease_quaternions", "edge_directions",
            "evaluate", "fold", "fold_angles", "fold_function", "fold_multipliers",
-           "folded_function", "locate_failure", "march", "marched_function", "panel_cell",
-           "panel_quaternions_function", "pattern_function", "qmul", "rotate_planar",
-           "rotated_edges"]
+           "folded_function", "folded_vertices", "locate_failure", "march", "marched_function",
+           "panel_cell", "panel_quaternions_function", "pattern_function", "qmul",
+           "rotate_planar", "rotated_edges"]
 
 #: The second check fails when | |mu_abc| - 1 | is at most this.
 MU_TOL = 1e-12
