@@ -34,6 +34,7 @@ MODULES = {
     "export": "io.export", "errors": "errors", "files": "files", "memory": "memory",
     "sweeps": "sweeps", "cli": "cli",
     "model": "model", "targets": "targets", "contact": "contact", "io": "io", "show": "show",
+    "mechanics": "mechanics",
 }
 
 
