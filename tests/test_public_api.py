@@ -37,6 +37,13 @@ PUBLIC = [
     "design.from_config", "results.Fit", "sweeps.run", "sweeps.Study", "sweeps.FIT_COLUMNS",
     "sweeps.MAX_DESIGNS", "sweeps.csv_frame",
     "ipopt_options.OPTIONS", "ipopt_options.check_ipopt_options",
+    # mechanics
+    "mechanics.Material", "mechanics.Material.named", "mechanics.MATERIALS",
+    "mechanics.BarAndHinge", "mechanics.BarAndHinge.rigidity_matrix",
+    "mechanics.BarAndHinge.stiffness", "mechanics.BarAndHinge.modes",
+    "mechanics.BarAndHinge.solve", "mechanics.BarAndHinge.point_stiffness",
+    "mechanics.Ties", "mechanics.folding_velocity", "mechanics.poisson_ratio",
+    "mechanics.poisson_map",
 ]
 
 
