@@ -46,6 +46,7 @@ from rffqm_nlp.model import pattern
 from rffqm_nlp.targets import shape
 from rffqm_nlp.targets import surfaces
 from rffqm_nlp.model import vertex
+from rffqm_nlp import mechanics
 from rffqm_nlp.errors import RffqmError
 
 # rq.collisions is the function, so the module by its name
@@ -54,13 +55,13 @@ clearance = importlib.import_module("rffqm_nlp.design.clearance")
 
 #: The modules whose public callables are fuzzed.
 MODULES = (boundary, pattern, numpy_model, marching, vertex, lengths, shape, surfaces,
-           curvature, collisions, clearance, backend)
+           curvature, collisions, clearance, backend, mechanics)
 #: Longest time one call may take (seconds) before it counts as a hang.
 CALL_LIMIT = 20.0
 #: Result records: dataclasses that store what they are given and compute nothing (their
 #: fields come from the functions fuzzed here, whose results are checked).
 RECORDS = {"collisions.CollisionReport", "curvature.Curvature", "lengths.SideLengthSolution",
-           "clearance.Closest"}
+           "clearance.Closest", "mechanics.Modes", "mechanics.Response"}
 
 
 # --------------------------------------------------------------------------- valid inputs
@@ -76,6 +77,9 @@ NLP = _PROBLEM.transcribe()
 NLP_PATTERN = numpy_model.march(_PROBLEM.start().boundary)
 F2 = marching.pattern_function(2, 2)
 QUAT = (np.ones((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)))
+SHEET = mechanics.Material(E=1e9, nu=0.3, thickness=1e-3, fold_stiffness=0.1, density=900.0)
+BAR_AND_HINGE = mechanics.BarAndHinge(PAT, 1.0, SHEET, width=0.1)
+HELD = [[1, 1], [1, 3], [3, 1]]
 
 
 def plane_fn(u, v):
@@ -277,6 +281,25 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "files.check_value": (rq.files.check_value, dict(
         value=2, key=rq.files.Key("whole", low=1), name="n")),
     "files.describe_value": (rq.files.describe_value, dict(value=np.array(2.5))),
+    # mechanics
+    "mechanics.Material": (mechanics.Material, dict(E=1e9, nu=0.3, thickness=1e-3,
+                                                    fold_stiffness=0.1, density=900.0)),
+    "mechanics.Material.named": (mechanics.Material.named, dict(name="paper")),
+    "mechanics.Material.with_fold_stiffness": (SHEET.with_fold_stiffness,
+                                               dict(fold_stiffness=0.2)),
+    "mechanics.BarAndHinge": (mechanics.BarAndHinge, dict(pattern=PAT, omega=1.0,
+                                                          material=SHEET, width=0.1)),
+    "mechanics.BarAndHinge.modes": (BAR_AND_HINGE.modes, dict(k=8)),
+    "mechanics.BarAndHinge.solve": (BAR_AND_HINGE.solve, dict(
+        loads=[[2, 2, 0.0, 0.0, -1.0]], supports=HELD, ties=[[[1, 1], [3, 3]]], gravity=True,
+        displacements=[[3, 3, 0.0, 0.0, 1e-4]], down=(0.0, 0.0, -1.0))),
+    "mechanics.BarAndHinge.point_stiffness": (BAR_AND_HINGE.point_stiffness, dict(
+        vertex=(2, 2), direction=(0.0, 0.0, 1.0), supports=HELD, ties=None)),
+    "mechanics.Ties": (mechanics.Ties, dict(pairs=[[[1, 1], [3, 3]]], stiffness=1e5)),
+    "mechanics.folded_state": (mechanics.folded_state, dict(pattern=PAT, omega=1.0)),
+    "mechanics.folding_velocity": (mechanics.folding_velocity, dict(pattern=PAT, omega=1.0)),
+    "mechanics.poisson_ratio": (mechanics.poisson_ratio, dict(pattern=PAT, omega=1.0)),
+    "mechanics.poisson_map": (mechanics.poisson_map, dict(pattern=PAT, omega=1.0)),
 }
 #: Calls that take no arguments: called once each, their results checked.
 NO_ARGUMENTS = {"surfaces.names": surfaces.names, "marching.panel_cell": marching.panel_cell,
@@ -291,7 +314,9 @@ FEWER = {"lengths.side_length_nlp": 8, "surfaces.Mesh": 8, "lengths.side_length_
          "collisions.collisions": 12, "clearance.closest": 12, "clearance.constrain": 8,
          "curvature.curvature_maps": 12, "shape.shape_fit": 10, "shape.surface_area": 10,
          "boundary.refine": 12, "surfaces.Surface.lattice": 10,
-         "surfaces.Surface.closest_points": 12}
+         "surfaces.Surface.closest_points": 12, "mechanics.BarAndHinge": 16,
+         "mechanics.BarAndHinge.modes": 16, "mechanics.BarAndHinge.solve": 16,
+         "mechanics.BarAndHinge.point_stiffness": 16}
 
 
 # --------------------------------------------------------------------------- bad values
