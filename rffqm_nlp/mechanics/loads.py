@@ -83,7 +83,10 @@ def check_vertices(value: Any, name: str, N: int, M: int, least: int = 0) -> np.
     """``value`` as (k, 2) whole 1-based vertices (i, j) with 1 <= i <= N+1, 1 <= j <= M+1
     and at least ``least`` of them; :class:`InputError` otherwise."""
     arr = finite_array(value, name, allowed="a list of 1-based vertices (i, j)")
-    arr = arr.reshape(-1, 2) if arr.size and arr.shape[-1] == 2 else arr
+    if arr.size == 0:
+        arr = arr.reshape(0, 2)
+    elif arr.shape == (2,):
+        arr = arr[None]
     if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < least or np.any(arr != np.round(arr)):
         raise InputError(f"{name} must be at least {least} whole 1-based vertices (i, j), "
                          f"got shape {arr.shape}")
@@ -241,9 +244,14 @@ def _response(model: "BarAndHinge", u: np.ndarray, K: sp.spmatrix, f: np.ndarray
     Ku = K @ u
     strains = model.rigidity_matrix() @ u / model.bar_lengths()
     moments = model.hinge_stiffness() * (model.hinge_jacobian() @ u)
+    with np.errstate(all="ignore"):
+        energy = 0.5 * float(u @ Ku)
+    parts = (size, strains, moments, tie_forces, Ku, np.array(energy))
+    if not all(np.all(np.isfinite(part)) for part in parts):
+        raise InputError("the response overflows: the loads or displacements are too large "
+                         "for floating point")
     return Response(U, float(size.max()) * 1e3, (int(at[0]) + 1, int(at[1]) + 1), strains,
-                    moments, tie_forces, (Ku - f).reshape(N + 1, M + 1, 3),
-                    0.5 * float(u @ Ku))
+                    moments, tie_forces, (Ku - f).reshape(N + 1, M + 1, 3), energy)
 
 
 def point_stiffness(model: "BarAndHinge", vertex: Any, direction: Any,

@@ -24,19 +24,20 @@ from ..files import Key, check_value
 #: Filipov et al.'s (2017) bending coefficient C_B of k_B = C_B D_p (D/t)^(1/3).
 BENDING_COEFFICIENT = 0.55
 
-_KEYS = {"E": Key("number", low=0.0, low_open=True, high=1e13, hint="(Pa)"),
+_KEYS = {"E": Key("number", low=1e3, high=1e13, hint="(Pa)"),
          "nu": Key("number", low=-0.99, high=0.5, high_open=True),
-         "thickness": Key("number", low=0.0, low_open=True, high=1.0, hint="(m)"),
+         "thickness": Key("number", low=1e-7, high=1.0, hint="(m)"),
          "fold_stiffness": Key("number", low=0.0, high=1e9, hint="(N m/rad per m of crease)"),
          "density": Key("number", low=0.0, high=1e5, hint="(kg/m^3)")}
 
 
 @dataclass(frozen=True)
 class Material:
-    """A sheet: Young's modulus ``E`` (Pa), Poisson's ratio ``nu`` (in (-0.99, 0.5)),
-    ``thickness`` (m), the fold hinges' stiffness per length of crease ``fold_stiffness``
-    (N m/rad per m; 0 makes free hinges) and ``density`` (kg/m^3). Every field is
-    checked; :class:`InputError` names the first one out of range."""
+    """A sheet: Young's modulus ``E`` (Pa, 1e3 to 1e13), Poisson's ratio ``nu`` (in
+    [-0.99, 0.5)), ``thickness`` (m, 1e-7 to 1), the fold hinges' stiffness per length of
+    crease ``fold_stiffness`` (N m/rad per m, 0 to 1e9; 0 makes free hinges) and
+    ``density`` (kg/m^3, 0 to 1e5). Every field is checked; :class:`InputError` names the
+    first one out of range."""
 
     E: float
     nu: float

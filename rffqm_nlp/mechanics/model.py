@@ -30,7 +30,7 @@ from .loads import Response, point_stiffness, solve
 from .material import Material, bending_stiffness, check_material, membrane_matrix
 from .modes import Modes, folding_energy, softest_modes
 
-_WIDTH = Key("number", low=0.0, low_open=True, high=1e4, optional=True, hint="(m)")
+_WIDTH = Key("number", low=1e-6, high=1e4, optional=True, hint="(m)")
 #: Most modes :meth:`BarAndHinge.modes` computes.
 MAX_MODES = 200
 
@@ -38,8 +38,8 @@ MAX_MODES = 200
 class BarAndHinge:
     """The N4B5 bar-and-hinge model of ``pattern`` folded at ``omega`` (module docstring).
 
-    ``material`` is a :class:`~.material.Material`; ``width`` (m) the flat pattern's extent
-    along x, None to read the pattern's lengths as metres. Raises :class:`InputError` for
+    ``material`` is a :class:`~.material.Material`; ``width`` (m, 1e-6 to 1e4) the flat
+    pattern's extent along x, None to read the pattern's lengths as metres. Raises :class:`InputError` for
     a bad argument.
     """
 
