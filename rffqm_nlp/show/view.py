@@ -518,8 +518,14 @@ def write_html(result: DesignResult, path: str | os.PathLike, frames: int = 24,
                target: Surface | None = None) -> Path:
     """Write the figure of ``result`` (:func:`spec`, with ``target``) as one self-contained
     HTML page (works offline), atomically; returns the path."""
+    return write_figure(spec(result, frames, target), path)
+
+
+def write_figure(fig: dict, path: str | os.PathLike, title: str = "rffqm-nlp design") -> Path:
+    """Write a figure {"data", "layout"} as one self-contained HTML page titled ``title``
+    (works offline), atomically; returns the path."""
     page = ('<!DOCTYPE html>\n<html><head><meta charset="utf-8">'
-            "<title>rffqm-nlp design</title>"
+            f"<title>{title}</title>"
             "<style>html,body{margin:0;height:100%}</style></head>\n<body>\n"
-            f"{_div(spec(result, frames, target), '100vh')}\n</body></html>\n")
+            f"{_div(fig, '100vh')}\n</body></html>\n")
     return write_text(path, page)
