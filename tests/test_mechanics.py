@@ -332,3 +332,51 @@ def test_bad_arguments_are_refused_in_one_line():
         with pytest.raises(InputError) as info:
             call()
         assert "\n" not in str(info.value)
+
+
+# --------------------------------------------------------------------------- command and view
+def test_command_prints_the_report_and_writes_the_view(tmp_path):
+    from typer.testing import CliRunner
+
+    from rffqm_nlp.cli.group import app
+    from view_results import miura_result
+
+    miura_result(6, 1.3).save(tmp_path / "design")
+    page = tmp_path / "load.html"
+    run = CliRunner().invoke(app, ["mechanics", str(tmp_path / "design"), "--load",
+                                   "4,4,0,0,-1", "--view", str(page), "--thickness", "0.3"])
+    assert run.exit_code == 0, run.output
+    for line in ("zero modes", "folding mode stiffness", "Poisson's ratio",
+                 "largest deflection (mm)", "point stiffness at (4, 4)", "largest bar strain",
+                 "largest hinge moment"):
+        assert line in run.output
+    assert page.read_text().startswith("<!DOCTYPE html>")
+    bad = CliRunner().invoke(app, ["mechanics", str(tmp_path / "design"), "--support", "1,1"])
+    assert bad.exit_code == 2 and "free to move rigidly" in bad.output
+    bad = CliRunner().invoke(app, ["mechanics", str(tmp_path / "design"), "--load", "1,2"])
+    assert bad.exit_code == 2 and "--load takes 5" in bad.output
+
+
+def test_displacement_view_slider_exaggerates_the_displacement():
+    from rffqm_nlp.show import displacement
+    from view_results import miura_result
+
+    result = miura_result(4, 1.3)
+    model = BarAndHinge(result.pattern, result.omega, SHEET, width=0.2)
+    response = model.solve(gravity=True)
+    fig = displacement.spec(result, response, model.scale)
+    steps = fig["layout"]["sliders"][0]["steps"]
+    Y = rq.numpy_model.fold(result.pattern, result.omega).reshape(-1, 3) \
+        @ result.rotation.T + result.translation
+    U = response.displacement.reshape(-1, 3) @ result.rotation.T / model.scale
+    labels = [s["label"] for s in steps]
+    assert "x1" in labels and labels[0] == "x0"
+    top = steps[-1]["args"][0]
+    moved = np.stack([top["x"][0], top["y"][0], top["z"][0]], axis=1) - Y
+    factor = float(np.sum(moved * U) / np.sum(U * U))
+    assert factor == pytest.approx(float(labels[-1][1:]), rel=5e-3)
+    assert np.allclose(moved, factor * U, rtol=1e-9, atol=1e-12 * np.abs(moved).max())
+    extent = np.ptp(Y, axis=0).max()
+    assert np.linalg.norm(moved, axis=1).max() == pytest.approx(0.1 * extent, rel=1e-9)
+    assert fig["data"][0]["intensity"] == pytest.approx(
+        (np.linalg.norm(response.displacement.reshape(-1, 3), axis=1) * 1e3).tolist())
