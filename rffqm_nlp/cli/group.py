@@ -12,6 +12,7 @@ from . import output
 from .check_command import check_cmd
 from .design_command import design
 from .forward_commands import march, targets
+from .mechanics_command import mechanics_cmd
 from .options import PanelsCommand
 from .output import shown
 from .result_commands import export, fold_cmd, render, view_cmd
@@ -71,5 +72,6 @@ app.command("fold")(fold_cmd)
 app.command()(export)
 app.command()(render)
 app.command("view")(view_cmd)
+app.command("mechanics")(mechanics_cmd)
 app.command()(targets)
 app.command()(march)
