@@ -41,8 +41,9 @@ class Modes:
     * ``folding_overlap``: the part of that velocity (without its rigid-body part, unit
       length) in the span of the modes up to the softest non-rigid one (the zero modes
       included): 1 when the folding mode is that mode, near 0 when another is softer;
-    * ``softer_than_folding``: how many non-rigid modes are softer than the folding mode by
-      more than 0.1% (0 where the folding mode is the softest non-rigid mode).
+    * ``softer_than_folding``: how many of the k computed non-rigid modes are softer than
+      the folding mode by more than 0.1% (0 where the folding mode is the softest
+      non-rigid mode; when it equals the computed non-rigid modes, more may be softer).
     """
 
     values: np.ndarray
