@@ -486,7 +486,7 @@ def test_folded_vertices_on_numbers_are_the_fold_graphs_values():
                           (4, pat.lv.T, "lv must be 3 x 5"),
                           (1, pat.beta[:, :2], "alpha, beta, sigma must be matrices of one"),
                           (5, [1.0, 2.0], "omega must be a number"),
-                          (5, ca.SX.sym("w"), "omega must be an MX matrix or numbers"),
+                          (5, ca.SX.sym("w"), "omega must be an MX matrix or finite real numbers"),
                           (2, "x", "sigma must be")):
         with pytest.raises(rq.InputError, match=words):
             kinematics.folded_vertices(*args[:k], bad, *args[k + 1:])
@@ -574,3 +574,30 @@ def test_the_graph_caches_are_bounded():
     for n in range(1, 5 * mg.SIZE_CACHE + 1):
         mg.fold_function(n, 1)
     assert mg.cached_graphs() - before <= 2 * mg.SIZE_CACHE
+
+
+@pytest.mark.parametrize("call", [
+    lambda s: mg.edge_directions(alpha=1.0, beta=s),
+    lambda s: mg.fold_multipliers(alpha=s, beta=0.3, sigma=1.0),
+    lambda s: mg.folded_vertices(s, s, s, s, s, 0.5)])
+def test_an_sx_argument_is_refused_in_one_line(call):
+    """The matrix builders are made of MX operations: an SX symbol, alone or beside numbers,
+    is refused by name, never a raw CasADi error (found by tests/test_fuzz_api.py); the
+    elementwise ones (qmul, crease_quaternion, rotate_planar) take SX, as the stencils do."""
+    with pytest.raises(rq.InputError, match=r"must be an MX matrix or finite real numbers .* got "
+                                         r"an SX$"):
+        call(ca.SX.sym("s"))
+
+
+def test_edge_directions_need_two_vertices_a_side():
+    with pytest.raises(rq.InputError, match="at least 2 x 2"):
+        mg.edge_directions(alpha=ca.MX.sym("a"), beta=0.3)
+    assert mg.edge_directions(alpha=np.full((2, 3), 1.0), beta=np.full((2, 3), 1.0)
+                                    ).shape == (2, 3)
+
+
+def test_the_elementwise_builders_take_sx_beside_numbers():
+    s = ca.SX.sym("s")
+    w, x, y, z = mg.qmul(p=(1.0, s, 0.0, 0.0), q=(0.0, 1.0, 0.0, 0.0))
+    f = ca.Function("f", [s], [ca.vertcat(w, x, y, z)])
+    np.testing.assert_allclose(f(0.5).full().ravel(), [-0.5, 1.0, 0.0, 0.0])

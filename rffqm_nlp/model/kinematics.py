@@ -36,14 +36,18 @@ SIZE_CACHE = 8
 
 
 # --------------------------------------------------------------------------- arguments
-def _matrices(what: str, **args: Any) -> tuple[list, bool]:
+def _matrices(what: str, elementwise: bool = False, **args: Any) -> tuple[list, bool]:
     """The arguments of the graph builder ``what``, each a CasADi matrix or finite real
     numbers (a 2-D array becomes a DM, a 1-D one a column, a number a float), and whether
     all were numeric (the result is then a number to check). :class:`InputError` names an
-    argument of another kind."""
+    argument of another kind, and an SX unless the builder is ``elementwise`` (the matrix
+    builders are made of MX operations)."""
     numeric = not is_casadi(*args.values())
     out = []
     for name, value in args.items():
+        if isinstance(value, ca.SX) and not elementwise:
+            raise InputError(f"{what}: {name} must be an MX matrix or finite real numbers (the "
+                             "kinematics is built of MX operations), got an SX")
         if is_casadi(value):
             out.append(value)
             continue
@@ -52,7 +56,8 @@ def _matrices(what: str, **args: Any) -> tuple[list, bool]:
         if arr.ndim > 2:
             raise InputError(f"{what}: {name} must be a matrix (at most 2 dimensions), got "
                              f"shape {arr.shape}")
-        out.append(ca.DM(arr) if arr.ndim else float(arr))
+        # beside a symbol a number stays a matrix (a DM indexes like one)
+        out.append(ca.DM(arr) if arr.ndim or not numeric else float(arr))
     return out, numeric
 
 
@@ -117,10 +122,11 @@ def edge_directions(alpha: ca.MX, beta: ca.MX) -> ca.MX:
 
     Accumulated sector angles (docs/paper.md s.4): along the left column the direction turns by
     alpha(i, 1) - beta(i+1, 1), along a row by pi - alpha - beta of each vertex. ``alpha``,
-    ``beta``: CasADi matrices or finite numbers of one shape (numbers give a DM).
+    ``beta``: MX matrices or finite numbers of one shape of at least 2 x 2 (numbers give a
+    DM).
     """
     (alpha, beta), numeric = _matrices("edge_directions", alpha=alpha, beta=beta)
-    _same_shape("edge_directions", "alpha, beta", [alpha, beta])
+    _same_shape("edge_directions", "alpha, beta", [alpha, beta], least=(2, 2))
     alpha, beta = ca.MX(alpha) if numeric else alpha, ca.MX(beta) if numeric else beta
     out = _edge_directions(alpha, beta)
     return ca.evalf(out) if numeric else out
@@ -145,12 +151,13 @@ def fold_multipliers(alpha: ca.MX, beta: ca.MX, sigma: ca.MX) -> tuple[ca.MX, ca
 
     kh[i, j] belongs to gamma1 of vertex (i+1, j+1) (the horizontal edge to its right),
     kv[i, j] to gamma2 (the vertical edge above it): eq:foldInitial, eq:foldMiddle and
-    eq:foldFinal with the half-angle forms of gamma2_bar and gamma1_bar. Numbers give DMs,
-    and :class:`InputError` where a vertex has no finite multiplier.
+    eq:foldFinal with the half-angle forms of gamma2_bar and gamma1_bar. ``alpha, beta,
+    sigma``: MX matrices or finite numbers of one shape of at least 2 x 2. Numbers give
+    DMs, and :class:`InputError` where a vertex has no finite multiplier.
     """
     (alpha, beta, sigma), numeric = _matrices("fold_multipliers", alpha=alpha, beta=beta,
                                               sigma=sigma)
-    _same_shape("fold_multipliers", "alpha, beta, sigma", [alpha, beta, sigma])
+    _same_shape("fold_multipliers", "alpha, beta, sigma", [alpha, beta, sigma], least=(2, 2))
     if numeric:
         alpha, beta, sigma = (ca.MX(x) for x in (alpha, beta, sigma))
         return _numeric_result(tuple(ca.evalf(x) for x in _fold_multipliers(alpha, beta, sigma)),
@@ -180,7 +187,7 @@ def crease_quaternion(theta: Scalar, k: Scalar, c: Scalar, s: Scalar, sign: floa
     numbers); numbers give DMs.
     """
     (theta, k, c, s, sign, k_den), numeric = _matrices(
-        "crease_quaternion", theta=theta, k=k, c=c, s=s, sign=sign, k_den=k_den)
+        "crease_quaternion", elementwise=True, theta=theta, k=k, c=c, s=s, sign=sign, k_den=k_den)
     _broadcast("crease_quaternion", dict(theta=theta, k=k, c=c, s=s, sign=sign, k_den=k_den))
     out = _crease_quaternion(theta, k, c, s, sign, k_den)
     if numeric:
@@ -209,7 +216,7 @@ def qmul(p: Quaternion, q: Quaternion) -> Quaternion:
     """Quaternion product p q, componentwise on (w, x, y, z) sequences of matrices (CasADi
     matrices or finite numbers of one shape; numbers give DMs)."""
     p, q = _quaternion(p, "p", "qmul"), _quaternion(q, "q", "qmul")
-    parts, numeric = _matrices("qmul", **{f"p[{i}]": x for i, x in enumerate(p)},
+    parts, numeric = _matrices("qmul", True, **{f"p[{i}]": x for i, x in enumerate(p)},
                                **{f"q[{i}]": x for i, x in enumerate(q)})
     _broadcast("qmul", {f"component {i}": x for i, x in enumerate(parts)})
     out = _qmul(parts[:4], parts[4:])
@@ -245,7 +252,8 @@ def rotate_planar(q, vx_, vy_):
     """Rotate in-plane vectors (vx, vy, 0) by unit quaternions q = (w, x, y, z), elementwise
     (CasADi matrices or finite numbers of one shape; numbers give DMs)."""
     q = _quaternion(q, "q", "rotate_planar")
-    parts, numeric = _matrices("rotate_planar", **{f"q[{i}]": x for i, x in enumerate(q)},
+    parts, numeric = _matrices("rotate_planar", True,
+                               **{f"q[{i}]": x for i, x in enumerate(q)},
                                vx=vx_, vy=vy_)
     _broadcast("rotate_planar", {f"argument {i}": x for i, x in enumerate(parts)})
     out = _rotate_planar(parts[:4], parts[4], parts[5])
@@ -354,12 +362,8 @@ def folded_vertices(alpha: ca.MX, beta: ca.MX, sigma: ca.MX, lh: ca.MX, lv: ca.M
     (N x M+1), N, M >= 1, ``omega`` a number or 1 x 1: MX matrices or numbers (numbers give
     DMs; SX is refused).
     """
-    args = dict(alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, omega=omega)
-    sx = [name for name, value in args.items() if isinstance(value, ca.SX)]
-    if sx:
-        raise InputError(f"folded_vertices: {sx[0]} must be an MX matrix or numbers (the "
-                         "kinematics is built of MX operations), got an SX")
-    (alpha, beta, sigma, lh, lv, omega), numeric = _matrices("folded_vertices", **args)
+    (alpha, beta, sigma, lh, lv, omega), numeric = _matrices(
+        "folded_vertices", alpha=alpha, beta=beta, sigma=sigma, lh=lh, lv=lv, omega=omega)
     rows, cols = _same_shape("folded_vertices", "alpha, beta, sigma", [alpha, beta, sigma],
                              least=(2, 2))
     _shapes_are("folded_vertices", f"alpha's {rows} x {cols} vertices",
