@@ -4,8 +4,9 @@ Commands: ``design`` (inverse design of a TOML target, with live solver progress
 (a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
 serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export``, ``render`` and
 ``view`` (of a saved design result), ``check`` (self-contact of a saved design or a FOLD
-file, exit 1 when not free), ``targets`` (the built-in surfaces) and ``march`` (forward
-marching of a perturbed Miura-ori).
+file, exit 1 when not free), ``mechanics`` (the bar-and-hinge model of a saved design:
+stiffness, modes, Poisson's ratio, loads), ``targets`` (the built-in surfaces) and ``march``
+(forward marching of a perturbed Miura-ori).
 
 Every user error (missing or bad file, unknown target, a failed marching check, an
 infeasible design, a solver failure, an option out of its range, a path no file can have)
