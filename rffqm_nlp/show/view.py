@@ -50,6 +50,7 @@ import gzip
 import json
 import os
 import uuid
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -65,6 +66,7 @@ from ..files import Key, check_value, write_text
 from ..io.foldfile import edge_assignments
 from ..model.pattern import motion_omegas
 from ..targets.surfaces import Surface, grid_faces
+from .ties import add_ties, tie_ids
 
 if TYPE_CHECKING:  # results will import this module for DesignResult._repr_html_
     from ..model.pattern import Pattern
@@ -416,12 +418,14 @@ def _scene(Y: np.ndarray, T: np.ndarray, designed: np.ndarray) -> dict:
             "camera": _camera(designed)}
 
 
-def spec(result: DesignResult, frames: int = 24, target: Surface | None = None) -> dict:
+def spec(result: DesignResult, frames: int = 24, target: Surface | None = None,
+         ties: Sequence | None = None) -> dict:
     """The figure of ``result`` as plain plotly JSON {"data", "layout"}: the traces in the
     order of :data:`TRACES`, a slider with ``frames + 1`` steps (see :func:`slider_omegas`)
     starting at the designed state, and a button that shows and hides the target
-    (``target``, or the result's: see :func:`_target_shape`). Sizes and coordinates are
-    checked as the module says (:func:`check_size` first, before any work)."""
+    (``target``, or the result's: see :func:`_target_shape`); with ``ties`` (the lock's
+    vertex pairs, :mod:`rffqm_nlp.show.ties`) a last trace of them. Sizes and coordinates
+    are checked as the module says (:func:`check_size` first, before any work)."""
     omega = float(result.omega)
     pat = result.pattern
     check_size(pat.N, pat.M, frames)
@@ -454,7 +458,11 @@ def spec(result: DesignResult, frames: int = 24, target: Surface | None = None) 
                          "buttons": [{"label": "target surface", "method": "restyle",
                                       "args": [{"visible": True}, [4]],
                                       "args2": [{"visible": False}, [4]]}]}]}
-    return {"data": data, "layout": layout}
+    fig = {"data": data, "layout": layout}
+    if ties:
+        add_ties(fig, Y.reshape(len(Y), -1, 3), tie_ids(ties, pat.N, pat.M), at,
+                 lambda a: _listed(a, decimals))
+    return fig
 
 
 def figure(result: DesignResult, frames: int = 24) -> go.Figure:
@@ -515,10 +523,10 @@ def repr_html(result: DesignResult, frames: int = 24) -> str:
 
 
 def write_html(result: DesignResult, path: str | os.PathLike, frames: int = 24,
-               target: Surface | None = None) -> Path:
-    """Write the figure of ``result`` (:func:`spec`, with ``target``) as one self-contained
-    HTML page (works offline), atomically; returns the path."""
-    return write_figure(spec(result, frames, target), path)
+               target: Surface | None = None, ties: Sequence | None = None) -> Path:
+    """Write the figure of ``result`` (:func:`spec`, with ``target`` and ``ties``) as one
+    self-contained HTML page (works offline), atomically; returns the path."""
+    return write_figure(spec(result, frames, target, ties), path)
 
 
 def write_figure(fig: dict, path: str | os.PathLike, title: str = "rffqm-nlp design") -> Path:
