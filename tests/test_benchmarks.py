@@ -25,9 +25,15 @@ def pages_snapshot() -> dict[str, float]:
     return {p.name: p.stat().st_mtime for p in PAGES.iterdir()}
 
 
-def test_every_benchmark_has_its_page():
+def test_every_benchmark_has_its_page_and_is_listed():
+    """Its page under docs/benchmarks, a row in that folder's index and in
+    benchmarks/README.md."""
     pages = {p.stem for p in PAGES.glob("*.md")}
     assert SCRIPTS and {Path(s).stem for s in SCRIPTS} <= pages
+    index, readme = (PAGES / "index.md").read_text(), (BENCHMARKS / "README.md").read_text()
+    for script in SCRIPTS:
+        assert f"]({Path(script).stem}.md)" in index, script
+        assert f"[{script}]({script})" in readme, script
 
 
 @pytest.mark.parametrize("script", SCRIPTS)
