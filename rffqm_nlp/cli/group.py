@@ -12,6 +12,7 @@ from . import output
 from .check_command import check_cmd
 from .design_command import design
 from .forward_commands import march, targets
+from .make_command import make_cmd
 from .mechanics_command import mechanics_cmd
 from .options import PanelsCommand
 from .output import shown
@@ -67,6 +68,7 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 # the commands, in the order the help lists them
 app.command(cls=PanelsCommand)(design)
 app.command("check")(check_cmd)
+app.command("make")(make_cmd)
 app.command("sweep")(sweep_cmd)
 app.command("fold")(fold_cmd)
 app.command()(export)
