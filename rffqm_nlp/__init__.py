@@ -35,6 +35,7 @@ MODULES = {
     "sweeps": "sweeps", "cli": "cli",
     "model": "model", "targets": "targets", "contact": "contact", "io": "io", "show": "show",
     "mechanics": "mechanics",
+    "make": "make",  # a package called as its function: rq.make(result, width="300mm")
 }
 
 
