@@ -7,15 +7,33 @@ folder: the cut and score files and the fold angles (:mod:`.cut_files` on the sh
 :mod:`.sheet`), the assembly sheet (:mod:`.assembly`), the thick panels (:mod:`.solids`,
 tapered after Tachi: :mod:`rffqm_nlp.contact.thick`) and the lock (:mod:`.lock`, its
 printable parts in :mod:`.parts`). The options are checked in :mod:`.options`.
+
+``rq.make`` is this package and is called as the function :func:`make` too
+(``rq.make(result, width="300mm")``): the package and the function share the name, and
+importing the package makes it the package's attribute of ``rffqm_nlp``, so the package
+itself is callable (:class:`CallableModule`).
 """
 
 from __future__ import annotations
+
+import sys
+import types
 
 from .lock import Stop, Tie, crease_stops, fold_velocity, lock_ties, tie_candidates
 from .options import MAKE_KEYS, PAPERS, PROCESSES, MakeOptions, length, make_options
 from .run import Made, make
 from .sheet import Sheet, perforation
 
-__all__ = ["MAKE_KEYS", "PAPERS", "PROCESSES", "Made", "MakeOptions", "Sheet", "Stop", "Tie",
-           "crease_stops", "fold_velocity", "length", "lock_ties", "make", "make_options",
-           "perforation", "tie_candidates"]
+
+class CallableModule(types.ModuleType):
+    """A module that is called as :func:`make`."""
+
+    def __call__(self, *args, **kwargs) -> Made:
+        return make(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = CallableModule
+
+__all__ = ["CallableModule", "MAKE_KEYS", "PAPERS", "PROCESSES", "Made", "MakeOptions",
+           "Sheet", "Stop", "Tie", "crease_stops", "fold_velocity", "length", "lock_ties",
+           "make", "make_options", "perforation", "tie_candidates"]
