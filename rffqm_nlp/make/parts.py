@@ -14,12 +14,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-
 from ..files import write_text
 from .cut_files import csv_text
 from .lock import Stop, Tie
-from .solids import meshes, write_stl
+from .solids import indexed, meshes, write_stl
 
 #: The columns of lock.csv and stops.csv.
 LOCK_COLUMNS = ("i1", "j1", "i2", "j2", "length_mm", "dlength_domega")
@@ -81,10 +79,7 @@ def write_lock_files(folder: Path, ties: list[Tie], stops: list[Stop],
     tie_rows = [(t.i1, t.j1, t.i2, t.j2, t.length, t.dlength_domega) for t in ties]
     stop_rows = [(s.i1, s.j1, s.i2, s.j2, s.length, math.degrees(s.angle), s.dangle_domega)
                  for s in stops]
-    parts = lock_parts(ties, stops, thickness)
-    solids = [p.to_mesh() for p in parts]
-    vertices = [np.asarray(m.vert_properties, dtype=float)[:, :3] for m in solids]
-    faces = [np.asarray(m.tri_verts, dtype=np.int64) for m in solids]
+    vertices, faces = zip(*(indexed(p) for p in lock_parts(ties, stops, thickness)))
     return [write_text(folder / "lock.csv", csv_text(LOCK_COLUMNS, tie_rows)),
             write_text(folder / "stops.csv", csv_text(STOP_COLUMNS, stop_rows)),
-            write_stl(folder / "lock.stl", meshes(vertices, faces))]
+            write_stl(folder / "lock.stl", meshes(list(vertices), list(faces)))]

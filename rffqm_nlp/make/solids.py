@@ -85,12 +85,22 @@ def build_solids(pat: Pattern, omega: float, scale: float, thickness: float,
             if solid.is_empty():
                 raise InputError(f"panel ({i + 1}, {j + 1}) is bevelled away: a thickness "
                                  f"of {thickness:g} mm is too much for its fold angles")
-            mesh = solid.to_mesh()
-            vertices.append(np.asarray(mesh.vert_properties, dtype=float)[:, :3])
-            faces.append(np.asarray(mesh.tri_verts, dtype=np.int64))
+            v, f = indexed(solid)
+            vertices.append(v)
+            faces.append(f)
             volumes.append(solid.volume())
     return Solids(vertices, faces, np.array(volumes), np.array(areas), float(thickness),
                   panels.side)
+
+
+def indexed(solid) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and triangles (F, 3) of a manifold3d solid, as manifold3d indexes
+    them: closed and consistently oriented over that indexing (where a bevel passes
+    through a panel's corner, two of its vertices may lie within round-off of each other;
+    they stay two vertices, so that no triangle degenerates)."""
+    mesh = solid.to_mesh()
+    return (np.asarray(mesh.vert_properties, dtype=float)[:, :3],
+            np.asarray(mesh.tri_verts, dtype=np.int64))
 
 
 def placed(solids: Solids, pat: Pattern, omega: float, scale: float,
