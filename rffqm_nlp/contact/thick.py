@@ -210,8 +210,8 @@ def _side(pat: Pattern, omega: float, side: str | int) -> int:
 def choose_side(pat: Pattern, omega: float) -> int:
     """The material's side, -1 (back) or +1 (front), that bevels less: the smaller sum,
     over the creases that close on that side, of the crease length times tan(|gamma|/2)
-    (the area a bevel removes from both panels' cross-section is t^2 tan(|gamma|/2) / 2
-    per unit length, gamma the fold angle at ``omega``); the back on a tie."""
+    (a bevel removes t^2 tan(|gamma|/2) / 2 of each panel's cross-section per unit length
+    of crease, gamma the fold angle at ``omega``); the back on a tie."""
     check_pattern(pat, "pattern")
     omega = check_fold_angle(omega, "omega")
     u = _inward(pat.X)
