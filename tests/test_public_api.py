@@ -37,6 +37,8 @@ PUBLIC = [
     "design.from_config", "results.Fit", "sweeps.run", "sweeps.Study", "sweeps.FIT_COLUMNS",
     "sweeps.MAX_DESIGNS", "sweeps.csv_frame",
     "ipopt_options.OPTIONS", "ipopt_options.check_ipopt_options",
+    # making a design (rq.make is the package, called as its function)
+    "make", "make.make", "make.lock_ties", "make.perforation", "make.MAKE_KEYS",
     # mechanics
     "mechanics.Material", "mechanics.Material.named", "mechanics.MATERIALS",
     "mechanics.BarAndHinge", "mechanics.BarAndHinge.rigidity_matrix",
