@@ -209,3 +209,16 @@ def test_bad_arguments_are_refused(kwargs):
 def test_too_much_curvature_is_infeasible():
     with pytest.raises(InfeasibleDesign, match="larger omega"):
         cf.closed_form_boundary(2.0, 0.0, panels=(8, 8), size=(4.0, 4.0))
+
+
+@pytest.mark.parametrize("call", [
+    lambda: cf.closed_form_start(None), lambda: cf.closed_form_design("sphere_cap"),
+    lambda: cf.transposed(None), lambda: cf.zigzag_fold("2", 1.1, 0.0),
+    lambda: cf.zigzag_fold(2.0, 1.1, 1.2), lambda: cf.zigzag_gain(1.2, 1.1, 2.0),
+    lambda: cf.straight_gain(-1.0, 0.0, 1.1, 2.0), lambda: cf.first_order_gains(1.1, 0.0),
+    lambda: cf.separable_curvatures(np.zeros((0, 3)), np.zeros((0, 3))),
+    lambda: cf.lattice_steps(np.zeros((1, 4, 3))),
+    lambda: cf.curvatures_along_lattice("sphere_cap", 2, 2)])
+def test_the_other_public_functions_refuse_bad_arguments(call):
+    with pytest.raises(InputError):
+        call()

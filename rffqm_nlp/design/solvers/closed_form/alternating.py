@@ -22,7 +22,7 @@ from ....errors import InfeasibleDesign, InputError, MarchingError, one_line
 from ....files import Key, check_value, describe_value
 from ....model import numpy_model
 from ....model.backend import finite_array
-from ....model.boundary import LAYOUTS, MAX_SIDE, BoundaryData
+from ....model.boundary import LAYOUTS, MAX_SIDE, BoundaryData, check_boundary
 from .cell import straight_gain, straight_tilt, zigzag_gain, zigzag_tilt
 
 #: A curvature along one direction: a number, a function of the arc length (taking and
@@ -42,7 +42,7 @@ _ACUTE = Key("number", low=0.0, high=np.pi / 2, low_open=True, high_open=True,
              hint="(radians)")
 _OMEGA = Key("number", low=-np.pi, high=np.pi, low_open=True, high_open=True,
              hint="(radians, not 0)")
-_RATIO = Key("number", low=1.0, low_open=True)
+_RATIO = Key("number", low=1.0, high=1e6, low_open=True)
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,18 @@ def zigzag_fold(omega: float, alpha0: float, delta: float) -> float:
     """The fold angle of the zig-zag creases of the layout "zigzag_i" folded at ``omega``
     whose first zig-zag vertex line has the angle perturbation ``delta``: the crease
     (1, 1) -> (2, 1), whose multiplier is cos(alpha0) / cos(delta) (eq:foldAngMult), so
-    tan(omega_z / 2) = -tan(omega / 2) cos(delta) / cos(alpha0) (eq:foldParams)."""
+    tan(omega_z / 2) = -tan(omega / 2) cos(delta) / cos(alpha0) (eq:foldParams).
+    ``omega`` in (-pi, pi), ``alpha0`` in (0, pi/2), |delta| < alpha0; else
+    :class:`InputError`."""
+    omega = check_value(omega, _OMEGA, "omega")
+    alpha0 = check_value(alpha0, _ACUTE, "alpha0")
+    delta = check_value(delta, Key("number", low=-alpha0, high=alpha0, low_open=True,
+                                   high_open=True), "delta")
+    return _zigzag_fold(omega, alpha0, delta)
+
+
+def _zigzag_fold(omega: float, alpha0: float, delta: float) -> float:
+    """:func:`zigzag_fold` of checked arguments."""
     return float(-2 * np.arctan(np.tan(omega / 2) * np.cos(delta) / np.cos(alpha0)))
 
 
@@ -122,7 +133,7 @@ def _zigzag_i(k_x: np.ndarray, steps_x: np.ndarray, k_y: np.ndarray, steps_y: np
     diagonal (:func:`transposed`), whose zig-zag fold depends on its first delta: a fixed
     point, found by the secant method on that delta."""
     def design(first: float) -> tuple[Canonical, float]:
-        omega_z = zigzag_fold(omega, alpha0, first)
+        omega_z = _zigzag_fold(omega, alpha0, first)
         sign = float(np.sign(omega_z))
         made = _canonical(sign * k_x, steps_x, sign * k_y, steps_y, alpha0, abs(omega_z),
                           max_delta, max_ratio)
@@ -194,7 +205,10 @@ def _turning(k: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def transposed(bd: BoundaryData) -> BoundaryData:
     """The pattern mirrored across its diagonal: vertex (i, j) becomes (j, i), its a-role
     triple (alpha, beta, sigma) becomes (alpha, pi - beta, -sigma) (the upper-left panel
-    becomes the lower-right one; docs/closed_form.md s.5), the left and bottom sides swap."""
+    becomes the lower-right one; docs/closed_form.md s.5), the left and bottom sides swap.
+    ``bd`` must be :class:`BoundaryData`; else :class:`InputError`."""
+    check_boundary(bd)
+
     def mirrored(tri: np.ndarray) -> np.ndarray:
         return np.column_stack([tri[:, 0], np.pi - tri[:, 1], -tri[:, 2]])
 

@@ -26,7 +26,7 @@ from scipy.optimize import brentq
 
 from ....errors import InfeasibleDesign, InputError
 from ....files import Key, check_value
-from ....model.backend import finite_array
+from ....model.backend import finite_array, finite_result
 
 E1 = np.array([1.0, 0.0, 0.0])
 E3 = np.array([0.0, 0.0, 1.0])
@@ -114,7 +114,8 @@ def zigzag_gain(delta: np.ndarray, alpha0: float, omega_z: float
     ``omega_z`` in (0, pi), ``delta`` finite numbers (radians) with |delta| < alpha0; else
     :class:`InputError`."""
     alpha0, omega_z = _checked(alpha0, omega_z)
-    return _zigzag_gain(_perturbation(delta, alpha0), alpha0, omega_z)
+    return finite_result(_zigzag_gain(_perturbation(delta, alpha0), alpha0, omega_z),
+                         "zigzag_gain has no finite value here")
 
 
 def _zigzag_gain(delta: np.ndarray, alpha0: float, omega_z: float
@@ -140,7 +141,8 @@ def straight_gain(Delta: np.ndarray, delta: float, alpha0: float, omega_z: float
     D = finite_array(Delta, "Delta")
     if np.any(D <= -1):
         raise InputError("Delta must be > -1 (the even rows' sides stay positive)")
-    return _straight_gain(D, delta, alpha0, omega_z)
+    return finite_result(_straight_gain(D, delta, alpha0, omega_z),
+                         "straight_gain has no finite value here: Delta is too large")
 
 
 def _straight_gain(D: np.ndarray, delta: float, alpha0: float, omega_z: float
@@ -188,7 +190,7 @@ class Tilt:
         range exceeds what the table holds."""
         t_lo, t_hi = float(np.min(turning)), float(np.max(turning))
         a_lo, a_hi = float(self.angles[0]), float(self.angles[-1])
-        if t_hi - t_lo >= a_hi - a_lo:
+        if not np.isfinite(t_hi - t_lo) or t_hi - t_lo >= a_hi - a_lo:
             raise InfeasibleDesign(
                 f"the {what} turns the folded lattice by {t_hi - t_lo:.4g} rad along its line, "
                 f"but the alternating perturbation reaches at most {a_hi - a_lo:.4g} rad at this "

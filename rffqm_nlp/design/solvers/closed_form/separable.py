@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ....errors import InputError
 from ....files import Key, check_value
-from ....model.backend import finite_array
+from ....model.backend import finite_array, finite_result
 from ....targets.parametric import Surface, check_surface
 
 
@@ -50,12 +51,16 @@ def curvatures_along_lattice(target: Surface, N: int, M: int) -> tuple[np.ndarra
 def separable_curvatures(k_u: np.ndarray, k_v: np.ndarray) -> Separable:
     """The :class:`Separable` approximation of the curvature fields k_u along i and k_v
     along j, each (n, m) with n, m >= 2 (finite numbers; else :class:`InputError`)."""
-    k_u = finite_array(k_u, "k_u", ndim=2)
+    k_u = finite_array(k_u, "k_u", ndim=2, least=1)
     k_v = finite_array(k_v, "k_v", shape=k_u.shape)
-    kx, ky = k_u.mean(axis=1), k_v.mean(axis=0)
-    left = np.concatenate([(k_u - kx[:, None]).ravel(), (k_v - ky[None, :]).ravel()])
-    scale = np.sqrt(np.mean(np.concatenate([k_u.ravel(), k_v.ravel()]) ** 2))
-    residual = float(np.sqrt(np.mean(left ** 2)) / scale) if scale > 0 else 0.0
+    if 0 in k_u.shape:
+        raise InputError(f"k_u and k_v must hold at least one row and column, got {k_u.shape}")
+    with np.errstate(all="ignore"):
+        kx, ky = k_u.mean(axis=1), k_v.mean(axis=0)
+        left = np.concatenate([(k_u - kx[:, None]).ravel(), (k_v - ky[None, :]).ravel()])
+        scale = np.sqrt(np.mean(np.concatenate([k_u.ravel(), k_v.ravel()]) ** 2))
+        residual = float(np.sqrt(np.mean(left ** 2)) / scale) if scale > 0 else 0.0
+    finite_result((kx, ky, residual), "the curvatures are too large for floating point")
     return Separable(kx=kx, ky=ky, residual=residual)
 
 
@@ -64,6 +69,8 @@ def lattice_steps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     of each pair of consecutive rows and of columns of the lattice ``points`` (n, m, 3),
     the least-squares steps of a lattice whose steps depend on one index each."""
     P = finite_array(points, "points", shape=(None, None, 3))
+    if min(P.shape[:2]) < 2:
+        raise InputError(f"points must be a lattice of at least 2 x 2 points, got {P.shape}")
     along_i = np.linalg.norm(P[1:] - P[:-1], axis=-1).mean(axis=1)
     along_j = np.linalg.norm(P[:, 1:] - P[:, :-1], axis=-1).mean(axis=0)
     return along_i, along_j

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from ....files import Key, check_value
+from ....errors import InputError
+from ....files import Key, check_value, describe_value
 from ....model import numpy_model
 from ....targets import shape
 from .alternating import ClosedForm, closed_form_boundary
@@ -23,6 +24,7 @@ def closed_form_design(problem: "DesignProblem", omega: float | None = None) -> 
     (default the problem's omega0). Raises :class:`InfeasibleDesign` (see
     :func:`.closed_form_boundary`) when no alternating perturbation of that Miura-ori at
     that fold bends so far."""
+    _check_problem(problem)
     lattice = problem.target.lattice(problem.N, problem.M)
     return _design(problem, lattice, omega)
 
@@ -32,6 +34,7 @@ def closed_form_start(problem: "DesignProblem", omega: float | None = None) -> "
     place of the Miura-ori: the same target lattice and spacing, the closed form's boundary
     data and omega, and the rigid motion (Kabsch) that aligns its folded coarse lattice to
     the target lattice. Raises :class:`InfeasibleDesign` as :func:`closed_form_design`."""
+    _check_problem(problem)
     miura = problem.start()
     design = _design(problem, miura.target_points, omega)
     coarse = shape.coarse_grain(numpy_model.fold(numpy_model.march(design.boundary),
@@ -39,6 +42,15 @@ def closed_form_start(problem: "DesignProblem", omega: float | None = None) -> "
     rotation, translation, _ = shape.kabsch(coarse, miura.target_points)
     return replace(miura, boundary=design.boundary, omega=design.omega, rotation=rotation,
                    translation=translation)
+
+
+def _check_problem(problem: "DesignProblem") -> None:
+    """An :class:`InputError` unless ``problem`` is a design problem (known by its fields and
+    its start: this package does not import the problem's module, which may import it)."""
+    names = ("target", "panels", "alpha0", "layout", "omega0", "min_angle", "start", "N", "M")
+    if not all(hasattr(problem, name) for name in names):
+        raise InputError("problem must be a design problem (rffqm_nlp.DesignProblem), got "
+                         f"{describe_value(problem)}")
 
 
 def _design(problem: "DesignProblem", lattice, omega: float | None) -> ClosedForm:
