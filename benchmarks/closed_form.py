@@ -56,14 +56,11 @@ def has_hook() -> bool:
     return any(f.name == "start" for f in fields(SolveOptions))
 
 
-def best_time(make, repeat: int):
-    """(the best wall time of ``repeat`` calls of ``make`` (s), its last value)."""
-    best, value = np.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        value = make()
-        best = min(best, time.perf_counter() - t0)
-    return best, value
+def timed(make):
+    """(the wall time of one call of ``make`` (s), its value)."""
+    t0 = time.perf_counter()
+    value = make()
+    return time.perf_counter() - t0, value
 
 
 def start_fits(problem, start) -> dict:
@@ -90,7 +87,8 @@ def start_rows(name: str, n: int, repeat: int, omegas: list[float]) -> list[dict
                 lambda w=w: closed_form_start(problem, omega=w)) for w in omegas]
     rows = []
     for label, make in makers:
-        seconds, start = best_time(make, repeat)
+        runs = [timed(make) for _ in range(repeat)]
+        seconds, start = min(t for t, _ in runs), runs[-1][1]
         rows.append({"target": name, "n": n, "start": label, "time": seconds,
                      "omega": start.omega, **start_fits(problem, start)})
     return rows
