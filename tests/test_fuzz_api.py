@@ -52,16 +52,21 @@ from rffqm_nlp.errors import RffqmError
 # rq.collisions is the function, so the module by its name
 collisions = importlib.import_module("rffqm_nlp.contact.collisions")
 clearance = importlib.import_module("rffqm_nlp.design.clearance")
+# rq.make is the package called as its function make, so the package by its name
+make = importlib.import_module("rffqm_nlp.make")
+thick = importlib.import_module("rffqm_nlp.contact.thick")
 
 #: The modules whose public callables are fuzzed.
 MODULES = (boundary, pattern, numpy_model, marching, vertex, lengths, shape, surfaces,
-           curvature, collisions, clearance, backend, mechanics)
+           curvature, collisions, clearance, backend, mechanics, make, thick)
 #: Longest time one call may take (seconds) before it counts as a hang.
 CALL_LIMIT = 20.0
 #: Result records: dataclasses that store what they are given and compute nothing (their
 #: fields come from the functions fuzzed here, whose results are checked).
 RECORDS = {"collisions.CollisionReport", "curvature.Curvature", "lengths.SideLengthSolution",
-           "clearance.Closest", "mechanics.Modes", "mechanics.Response"}
+           "clearance.Closest", "mechanics.Modes", "mechanics.Response", "make.Made",
+           "make.MakeOptions", "make.Sheet", "make.Stop", "make.Tie", "thick.ThickPanels",
+           "thick.ThickReport"}
 
 
 # --------------------------------------------------------------------------- valid inputs
@@ -77,6 +82,9 @@ NLP = _PROBLEM.transcribe()
 NLP_PATTERN = numpy_model.march(_PROBLEM.start().boundary)
 F2 = marching.pattern_function(2, 2)
 QUAT = (np.ones((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)))
+#: A designed 4 x 4 sphere cap, to make.
+RESULT = rq.DesignProblem(target=CAP, panels=(4, 4)).solve(rq.SolveOptions(max_iter=30))
+CONES = thick.ThickPanels.build(PAT, 1.0, 0.05, "back").cones()
 SHEET = mechanics.Material(E=1e9, nu=0.3, thickness=1e-3, fold_stiffness=0.1, density=900.0)
 BAR_AND_HINGE = mechanics.BarAndHinge(PAT, 1.0, SHEET, width=0.1)
 HELD = [[1, 1], [1, 3], [3, 1]]
@@ -268,6 +276,28 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "clearance.panel_corners": (clearance.panel_corners, dict(N=2, M=3)),
     "clearance.choose_axis": (clearance.choose_axis, dict(P=TRIANGLES[0][[0, 1, 2, 2]],
                                                           Q=TRIANGLES[0][[0, 1, 2, 2]] + 1)),
+    # making a design, thick panels
+    "make.make": (make.make, dict(result=RESULT, width=100.0, thickness="0.2mm", ties=1)),
+    "make.make_options": (make.make_options, dict(table={"width": "10cm"}, where="[make]",
+                                                  process="cutter")),
+    "make.length": (make.length, dict(value="3mm", name="dash", positive=True)),
+    "make.perforation": (make.perforation, dict(length=20.0, dash=3.0, gap=1.0, relief=1.0)),
+    "make.lock_ties": (make.lock_ties, dict(pattern=RESULT.pattern, omega=RESULT.omega,
+                                            count=2, scale=10.0)),
+    "make.tie_candidates": (make.tie_candidates, dict(pattern=RESULT.pattern,
+                                                      omega=RESULT.omega, scale=10.0)),
+    "make.crease_stops": (make.crease_stops, dict(pattern=RESULT.pattern, omega=RESULT.omega,
+                                                  count=2, scale=10.0)),
+    "make.Sheet.of": (make.Sheet.of, dict(pat=RESULT.pattern, omega=RESULT.omega, scale=10.0)),
+    "thick.thick_collisions": (thick.thick_collisions, dict(
+        pattern=RESULT.pattern, omega_max=RESULT.omega, thickness=0.01, side="auto",
+        tol=1e-3)),
+    "thick.choose_side": (thick.choose_side, dict(pat=PAT, omega=1.0)),
+    "thick.panel_frames": (thick.panel_frames, dict(pat=PAT, Y=Y)),
+    "thick.ThickPanels.build": (thick.ThickPanels.build, dict(pat=PAT, omega=1.0,
+                                                              thickness=0.05, side="back")),
+    "thick.cone_gap": (thick.cone_gap, dict(h_a=CONES[0][0, 0], rays_a=CONES[1][0, 0],
+                                            h_b=CONES[0][1, 1], rays_b=CONES[1][1, 1])),
     # backend
     "backend.is_casadi": (backend.is_casadi, dict(args=1.0)),
     "backend.math_for": (backend.math_for, dict(args=1.0)),
@@ -316,7 +346,8 @@ FEWER = {"lengths.side_length_nlp": 8, "surfaces.Mesh": 8, "lengths.side_length_
          "boundary.refine": 12, "surfaces.Surface.lattice": 10,
          "surfaces.Surface.closest_points": 12, "mechanics.BarAndHinge": 16,
          "mechanics.BarAndHinge.modes": 16, "mechanics.BarAndHinge.solve": 16,
-         "mechanics.BarAndHinge.point_stiffness": 16}
+         "mechanics.BarAndHinge.point_stiffness": 16, "make.make": 6,
+         "thick.thick_collisions": 10, "make.tie_candidates": 12, "make.lock_ties": 12}
 
 
 # --------------------------------------------------------------------------- bad values

@@ -329,13 +329,6 @@ def test_lock_ties_match_the_folded_pattern_and_block_the_motion(cap, made):
     assert all(b.is_watertight and b.volume > 0 for b in bodies)
 
 
-def test_fold_velocity_is_the_derivative(cap):
-    dY = lock.fold_velocity(cap.pattern, 1.0)
-    h = 1e-6
-    fd = (rq.numpy_model.fold(cap.pattern, 1 + h) - rq.numpy_model.fold(cap.pattern, 1 - h)) / (2 * h)
-    assert np.abs(dY - fd).max() < 1e-6 * np.abs(fd).max()
-
-
 def test_stops_are_the_fastest_creases(cap):
     stops = lock.crease_stops(cap.pattern, cap.omega, 2)
     gh, gv = rq.numpy_model.fold_angles(cap.pattern, [cap.omega - 1e-6, cap.omega + 1e-6])

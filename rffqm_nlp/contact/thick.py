@@ -45,7 +45,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from ..files import Key, check_value
+from ..model.backend import finite_array
 from ..model.numpy_model import fold
 from ..model.pattern import Pattern, check_fold_angle, check_pattern
 from .broad import SAFETY
@@ -69,14 +71,25 @@ def panel_frames(pat: Pattern, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     3): rotations R (..., N, M, 3, 3) and translations T (..., N, M, 3), y = R x + T
     for every point x of the panel in the flat frame (exact for rigid panels: the frame of
     the sides a->c, a->b and their normal)."""
+    check_pattern(pat, "pattern")
+    Y = finite_array(Y, "Y", allowed=f"folded states of shape (..., {pat.N + 1}, "
+                     f"{pat.M + 1}, 3)")
+    if Y.shape[-3:] != (pat.N + 1, pat.M + 1, 3):
+        raise InputError(f"Y must be folded states of shape (..., {pat.N + 1}, "
+                         f"{pat.M + 1}, 3), got shape {Y.shape}")
+
     def frame(P):
         e1, e2 = P[..., :-1, 1:, :] - P[..., :-1, :-1, :], P[..., 1:, :-1, :] - P[..., :-1, :-1, :]
         return np.stack([e1, e2, cross(e1, e2)], axis=-1)
 
     X = pat.X
-    R = np.swapaxes(np.linalg.solve(np.swapaxes(frame(X), -1, -2),
-                                    np.swapaxes(frame(Y), -1, -2)), -1, -2)
-    T = Y[..., :-1, :-1, :] - np.einsum("...ij,...j->...i", R, X[:-1, :-1])
+    with np.errstate(all="ignore"):
+        R = np.swapaxes(np.linalg.solve(np.swapaxes(frame(X), -1, -2),
+                                        np.swapaxes(frame(Y), -1, -2)), -1, -2)
+        T = Y[..., :-1, :-1, :] - np.einsum("...ij,...j->...i", R, X[:-1, :-1])
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T))):
+        raise InputError("the panels' motions overflow: the states Y are too large for "
+                         "floating point")
     return R, T
 
 
@@ -235,8 +248,19 @@ def cone_gap(h_a: np.ndarray, rays_a: np.ndarray, h_b: np.ndarray,
     when their interiors are disjoint; -1 when they overlap. Disjoint when a candidate of
     the separating axis test (either cone's face normals, the cross products of a ray of
     each) leaves the cones on its two sides (touching allowed): exact for polyhedral
-    cones. ``h_*`` (n, F, 3) face normals, ``rays_*`` (n, R, 3) unit extreme rays (repeats
-    allowed). A cone turned by less than this angle about the apex stays clear."""
+    cones. ``h_*`` (n, F, 3) face normals, ``rays_*`` (n, R, 3) extreme rays (repeats
+    allowed; all scaled to unit length here). A cone turned by less than this angle about
+    the apex stays clear."""
+    h_a, rays_a, h_b, rays_b = (
+        finite_array(v, name, allowed="an array of shape (n, k, 3), n and k >= 1")
+        for v, name in ((h_a, "h_a"), (rays_a, "rays_a"), (h_b, "h_b"), (rays_b, "rays_b")))
+    shapes = [v.shape for v in (h_a, rays_a, h_b, rays_b)]
+    if any(len(sh) != 3 or sh[2] != 3 or sh[1] < 1 or sh[0] != shapes[0][0]
+           for sh in shapes):
+        raise InputError(f"h_a, rays_a, h_b, rays_b must be arrays of shape (n, k, 3) for "
+                         f"one n, got shapes {', '.join(map(str, shapes))}")
+    h_a, rays_a, h_b, rays_b = (_unit(v, name) for v, name in (
+        (h_a, "h_a"), (rays_a, "rays_a"), (h_b, "h_b"), (rays_b, "rays_b")))
     pairs = cross(rays_a[:, :, None, :], rays_b[:, None, :, :]).reshape(len(rays_a), -1, 3)
     m = np.concatenate([h_a, -h_b, pairs, -pairs], axis=1)        # (n, C, 3)
     length = norm(m)
@@ -246,6 +270,16 @@ def cone_gap(h_a: np.ndarray, rays_a: np.ndarray, h_b: np.ndarray,
     apart = np.any((length > 1e-12) & (on_a >= -eps) & (on_b <= eps), axis=1)
     gap = np.minimum(_to_polygon(rays_a, rays_b), _to_polygon(rays_b, rays_a))
     return np.where(apart, gap, -1.0)
+
+
+def _unit(v: np.ndarray, name: str) -> np.ndarray:
+    """The vectors v (..., 3) scaled to unit length; :class:`InputError` for a zero one."""
+    with np.errstate(all="ignore"):
+        size = np.sqrt(np.sum((v / np.max(np.abs(v), axis=-1, keepdims=True)) ** 2, axis=-1))
+        size = size * np.max(np.abs(v), axis=-1)
+    if not np.all(np.isfinite(size) & (size > 0)):
+        raise InputError(f"{name} must hold nonzero vectors")
+    return v / size[..., None]
 
 
 def _to_polygon(points: np.ndarray, rays: np.ndarray) -> np.ndarray:

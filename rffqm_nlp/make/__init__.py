@@ -11,7 +11,7 @@ printable parts in :mod:`.parts`). The options are checked in :mod:`.options`.
 ``rq.make`` is this package and is called as the function :func:`make` too
 (``rq.make(result, width="300mm")``): the package and the function share the name, and
 importing the package makes it the package's attribute of ``rffqm_nlp``, so the package
-itself is callable (:class:`CallableModule`).
+itself is callable.
 """
 
 from __future__ import annotations
@@ -19,21 +19,21 @@ from __future__ import annotations
 import sys
 import types
 
-from .lock import Stop, Tie, crease_stops, fold_velocity, lock_ties, tie_candidates
+from .lock import Stop, Tie, crease_stops, lock_ties, tie_candidates
 from .options import MAKE_KEYS, PAPERS, PROCESSES, MakeOptions, length, make_options
 from .run import Made, make
 from .sheet import Sheet, perforation
 
 
-class CallableModule(types.ModuleType):
+class _CallableModule(types.ModuleType):
     """A module that is called as :func:`make`."""
 
     def __call__(self, *args, **kwargs) -> Made:
         return make(*args, **kwargs)
 
 
-sys.modules[__name__].__class__ = CallableModule
+sys.modules[__name__].__class__ = _CallableModule
 
-__all__ = ["CallableModule", "MAKE_KEYS", "PAPERS", "PROCESSES", "Made", "MakeOptions",
-           "Sheet", "Stop", "Tie", "crease_stops", "fold_velocity", "length", "lock_ties",
+__all__ = ["MAKE_KEYS", "PAPERS", "PROCESSES", "Made", "MakeOptions",
+           "Sheet", "Stop", "Tie", "crease_stops", "length", "lock_ties",
            "make", "make_options", "perforation", "tie_candidates"]

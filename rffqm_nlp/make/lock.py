@@ -4,9 +4,9 @@ An RFFQM pattern folds with one degree of freedom, omega, so one stop that fixes
 quantity changing with omega holds the whole sheet. A tie holds the distance between two
 vertices; it blocks the motion best where that distance changes fastest with omega:
 d|y_p - y_q|/d omega = (y_p - y_q) . (dy_p/d omega - dy_q/d omega) / |y_p - y_q|, with
-dY/d omega exact, by forward differentiation of the folding graph
-(:func:`rffqm_nlp.model.marching.fold_function`, eq:defGrads .. eq:finalCalc). The
-distances themselves come from the NumPy model (:func:`rffqm_nlp.model.numpy_model.fold`).
+dY/d omega exact, by forward differentiation of the folding graph (eq:defGrads ..
+eq:finalCalc; :func:`rffqm_nlp.mechanics.folding.folded_state`), the distances from the
+NumPy model's folded state.
 
 Candidates (:func:`tie_candidates`) are the pairs of boundary vertices (a tie across the
 sheet, installed from its edge) whose straight segment meets no panel but at its ends;
@@ -28,12 +28,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from ..files import Key, check_value
 from ..io.export import triangles
-from ..model.marching import fold_function, fold_multipliers
+from ..mechanics.folding import folded_state
+from ..model.marching import fold_multipliers
 from ..model.numpy_model import fold, fold_angles
 from ..model.pattern import Pattern, check_fold_angle, check_pattern
 from .sheet import boundary_ring
@@ -78,19 +78,6 @@ def _checked(pattern, omega, scale) -> tuple[Pattern, float, float]:
     scale = check_value(scale, Key("number", low=0, low_open=True,
                                    hint="(mm per pattern unit)"), "scale")
     return pattern, omega, scale
-
-
-def fold_velocity(pattern: Pattern, omega: float) -> np.ndarray:
-    """dY/d omega (N+1, M+1, 3) at ``omega``: forward differentiation of the folding graph
-    (exact, no finite differences)."""
-    pattern, omega, _ = _checked(pattern, omega, 1.0)
-    f = fold_function(pattern.N, pattern.M)
-    forward = f.forward(1)
-    args = [pattern.alpha, pattern.beta, pattern.sigma, pattern.lh, pattern.lv, omega]
-    zeros = [np.zeros(f.size_out(k)) for k in range(3)]
-    seeds = [np.zeros(f.size_in(k)) for k in range(5)] + [1.0]
-    out = forward(*args, *zeros, *seeds)
-    return np.stack([np.asarray(ca.DM(o)) for o in out], axis=-1)
 
 
 def pair_rates(Y: np.ndarray, dY: np.ndarray, p: np.ndarray, q: np.ndarray
@@ -141,8 +128,7 @@ def tie_candidates(pattern: Pattern, omega: float, scale: float = 1.0) -> list[T
     :data:`SEGMENT_CHECKS` of them, those whose segment meets no panel."""
     pattern, omega, scale = _checked(pattern, omega, scale)
     N, M = pattern.N, pattern.M
-    Y = fold(pattern, omega).reshape(-1, 3)
-    dY = fold_velocity(pattern, omega).reshape(-1, 3)
+    Y, dY = (a.reshape(-1, 3) for a in folded_state(pattern, omega))
     p, q = _boundary_pairs(N, M)
     length, rate = pair_rates(Y, dY, p, q)
     order = np.argsort(-np.abs(rate), kind="stable")[:SEGMENT_CHECKS]

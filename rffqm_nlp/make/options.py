@@ -99,6 +99,8 @@ def length(value: Any, name: str, positive: bool = False) -> float:
     """``value`` (a number of mm, or a string "300mm", "0.5 cm", "12in") in millimetres,
     at most :data:`MAX_LENGTH`, above 0 if ``positive`` (else at least 0); else one
     :class:`InputError` line naming ``name``."""
+    name = check_value(name, Key("string"), "name")
+    positive = check_value(positive, Key("bool"), "positive")
     value = check_value(value, _LENGTH_KEY, name)
     if isinstance(value, str):
         match = _LENGTH.fullmatch(value)
@@ -117,7 +119,8 @@ def make_options(table: dict[str, Any] | None = None, where: str = "[make]",
     means not given), every key checked by :data:`MAKE_KEYS` and every length by
     :func:`length`; at most one of width, height and scale; the process's parameters
     (:data:`PROCESSES`) where not given. ``where`` names the table in messages."""
-    given = dict(check_table(table or {}, MAKE_KEYS, where))
+    where = check_value(where, Key("string"), "where")
+    given = dict(check_table({} if table is None else table, MAKE_KEYS, where))
     given.update(check_table({k: v for k, v in options.items() if v is not None},
                              MAKE_KEYS, "make"))
     sizes = [k for k in ("width", "height", "scale") if given.get(k) is not None]

@@ -19,7 +19,7 @@ from ..errors import InputError
 from ..files import Key, check_value
 from ..io.foldfile import edge_assignments, edge_fold_angles, edges_vertices, finite_pattern
 from ..model.pattern import Pattern, check_fold_angle
-from .options import finite_scale
+from .options import MAX_LENGTH, finite_scale
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,11 @@ def perforation(length: float, dash: float, gap: float, relief: float
     them n dashes and n - 1 gaps, n the whole number nearest to the ratio of the room plus
     a gap to ``dash`` + ``gap``, both stretched by one factor so that the first dash starts
     and the last one ends exactly at the reliefs (all in mm)."""
-    relief = min(relief, length / 4)
+    positive = Key("number", low=0, low_open=True, high=MAX_LENGTH, hint="(mm)")
+    length = check_value(length, positive, "length")
+    dash, gap = check_value(dash, positive, "dash"), check_value(gap, positive, "gap")
+    relief = min(check_value(relief, Key("number", low=0, high=MAX_LENGTH, hint="(mm)"),
+                             "relief"), length / 4)
     room = length - 2 * relief
     n = max(1, int(round((room + gap) / (dash + gap))))
     stretch = room / (n * dash + (n - 1) * gap)
