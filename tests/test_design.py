@@ -17,7 +17,9 @@ from rffqm_nlp.targets import surfaces
 from rffqm_nlp.design import transcription
 from rffqm_nlp.model import vertex as vx
 from rffqm_nlp.design import DesignProblem, SolveOptions
+from rffqm_nlp.design import solve as solve_module
 from rffqm_nlp.design.solvers import ipopt
+from rffqm_nlp.design.solvers.closed_form import closed_form_start
 from rffqm_nlp.design.results import DesignResult
 
 TARGETS = ["sphere_cap", "hyperboloid", "quarter_vase"]
@@ -673,3 +675,41 @@ def test_a_mesh_made_from_arrays_is_recorded_as_not_rebuildable():
     with pytest.raises(rq.InputError, match="cannot be rebuilt: the target of this result "
                                             "was a Mesh made in Python"):
         surfaces.from_config(config)
+
+
+# --------------------------------------------------------------------------- start
+def test_a_solve_from_the_closed_form_converges_and_records_its_start():
+    """SolveOptions.start = "closed-form": the alternating perturbation of the Miura for the
+    target's curvatures is the initial guess and the regularization's reference; the solve
+    reaches the optimality conditions and fits as closely as from the Miura-ori."""
+    problem = DesignProblem(target=surfaces.get("sphere_cap"), panels=(12, 12))
+    closed = problem.solve(start="closed-form")
+    miura = problem.solve()
+    assert closed.stats.status == "Solve_Succeeded"
+    assert closed.problem["solve"]["start"] == "closed-form"
+    assert miura.problem["solve"]["start"] == "miura"
+    assert closed.fit.rms < 1.5 * miura.fit.rms
+    start = solve_module.starting_design(problem, SolveOptions(start="closed-form"))
+    assert not np.allclose(start.boundary.to_vector(), problem.start().boundary.to_vector())
+
+
+def test_a_target_beyond_the_closed_form_starts_from_the_miura():
+    """A cylinder turned through 3 rad along the straight direction asks more of the
+    alternating perturbation than it gives (InfeasibleDesign): the solve starts from the
+    Miura-ori instead, as its start says."""
+    target = surfaces.get("cylinder", radius=1.0, domain=((-2.0, 2.0), (-1.5, 1.5)))
+    problem = DesignProblem(target=target, panels=(8, 8))
+    with pytest.raises(rq.InfeasibleDesign, match="alternating perturbation reaches at most"):
+        closed_form_start(problem)
+    start = solve_module.starting_design(problem, SolveOptions(start="closed-form"))
+    np.testing.assert_array_equal(start.boundary.to_vector(),
+                                  problem.start().boundary.to_vector())
+
+
+def test_start_is_a_solve_option_of_the_file():
+    problem, options = rq.design.from_config({"target": {"name": "sphere_cap"},
+                                              "solve": {"start": "closed-form"}})
+    assert options.start == "closed-form"
+    with pytest.raises(rq.InputError, match=r"\[solve\] start must be one of 'miura', "
+                                            r"'closed-form'"):
+        SolveOptions(start="coarse")

@@ -18,6 +18,8 @@ TRANSCRIPTIONS = ("sequential", "simultaneous")
 LM = "levenberg-marquardt"
 SOLVERS = ("ipopt", LM)
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
+#: The designs a solve can start from (SolveOptions.start).
+STARTS = ("miura", "closed-form")
 #: IPOPT options that a SolveOptions field (or solve's ``verbose``) sets, and that setting.
 IPOPT_FIELDS = {"max_iter": "SolveOptions.max_iter", "tol": "SolveOptions.tol",
                 "max_wall_time": "SolveOptions.time_limit",
@@ -48,6 +50,7 @@ SOLVE_KEYS = {
     "multistart": Key("whole", low=1, high=MAX_STARTS),
     "seed": Key("whole", low=0, high=2**63 - 1),
     "boundary_knots": Key("whole", low=0, hint="(0: the whole design from the start)"),
+    "start": Key("choice", choices=STARTS),
 }
 
 
@@ -109,7 +112,14 @@ class SolveOptions:
       (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`),
       then, unless ``stop_rms`` was reached there, in the whole design from its end; 0: the
       whole design from the start. Patterns up to about 2 x ``boundary_knots`` panels a side
-      have no coarser basis.
+      have no coarser basis;
+    * ``start``: the design the solve starts from, which is also the reference of the
+      regularization: "miura" (the default), the Miura-ori of the problem scaled and aligned
+      to the target lattice (:meth:`DesignProblem.start`), or "closed-form", the
+      alternating perturbation of that Miura for the target's curvatures along the pattern's
+      two directions (:func:`rffqm_nlp.design.solvers.closed_form.closed_form_start`; where
+      the target's curvatures ask too much of it, the Miura). A ``warm_start`` replaces
+      either as the initial guess. Measured in docs/benchmarks/closed_form.md.
     """
 
     solver: str = LM
@@ -126,6 +136,7 @@ class SolveOptions:
     multistart: int = 1
     seed: int = 0
     boundary_knots: int = BOUNDARY_KNOTS
+    start: str = "miura"
     trust: bool = False
 
     def __post_init__(self) -> None:

@@ -216,9 +216,11 @@ class DesignProblem:
                 raise InputError(f"the initial guess of {n} x {m} panels has [design] {name} "
                                  f"= {theirs[name]!r}, the problem {getattr(self, name)!r}: "
                                  f"a coarser design is carried over from the same Miura-ori")
-        reference = replace(self, panels=(n, m)).start().boundary
+        # the coarse design's deviations from its Miura-ori go onto this problem's Miura-ori
+        # (whatever design ``start`` holds: the closed form is a start of its own)
+        coarse_miura = replace(self, panels=(n, m)).start().boundary
         try:
-            boundary = refine(initial.boundary, reference, start.boundary)
+            boundary = refine(initial.boundary, coarse_miura, self.start().boundary)
             lattice = shape.coarse_grain(numpy_model.fold(numpy_model.march(boundary),
                                                           initial.omega))
         except (BoundaryDataError, MarchingError) as exc:

@@ -17,13 +17,14 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from .. import memory
-from ..errors import SolverFailed, raise_for_ipopt
+from ..errors import InfeasibleDesign, SolverFailed, raise_for_ipopt
 from ..targets import shape
 from . import clearance, measure, transcription
 from .multistart import solve_multistart
 from .options import LM, SolveOptions
 from .results import DesignResult, SolveStats
 from .solvers import ipopt, levenberg_marquardt
+from .solvers.closed_form import closed_form_start
 from .solvers.context import Outcome, Run
 
 if TYPE_CHECKING:  # for type hints only: the problem calls this module
@@ -39,7 +40,7 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
         return solve_multistart(problem, options, callback=callback, warm_start=warm_start,
                                 verbose=verbose)
     problem.check_reachable()
-    start = problem.start()
+    start = starting_design(problem, options)
     run = Run(options, callback=callback, verbose=verbose)
     x = None
     for stage, factor in enumerate(options.continuation):
@@ -47,7 +48,7 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
         nlp = problem.transcribe(start, problem.stage_weights(factor),
                                  warm_start if x is None else None, options)
         run.build_time += time.perf_counter() - t1
-        reference = (miura_point(problem, start, run)
+        reference = (reference_point(problem, start, run)
                      if warm_start is not None and x is None else None)
         outcome = _solve_stage(problem, nlp, start, run, nlp.x0 if x is None else x,
                                warm=warm_start is not None or stage > 0, reference=reference)
@@ -61,6 +62,18 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
         nlp, outcome = _keep_clearance(problem, nlp, start, run, outcome)
         stats = run.stats(outcome)
     return measure.result(problem, nlp, start, outcome.x, stats, options)
+
+
+def starting_design(problem: DesignProblem, options: SolveOptions) -> Start:
+    """The design a solve starts from and regularizes toward (``options.start``): the
+    problem's Miura-ori, or the closed form for its target's curvatures, the Miura where
+    those curvatures ask more than the closed form can give (:class:`InfeasibleDesign`)."""
+    if options.start == "closed-form":
+        try:
+            return closed_form_start(problem)
+        except InfeasibleDesign:
+            pass
+    return problem.start()
 
 
 def _solve_stage(problem: DesignProblem, nlp: transcription.NLP, start: Start, run: Run,
@@ -123,10 +136,11 @@ def _keep_clearance(problem: DesignProblem, nlp: transcription.NLP, start: Start
         stats=run.stats(outcome), last_iterate=outcome.x)
 
 
-def miura_point(problem: DesignProblem, start: Start, run: Run) -> Callable[[], np.ndarray]:
-    """The Miura start's point (n,) of the NLP, transcribed when first asked for (its
-    time counted as build time): where a warm start breaks a constraint, Levenberg-
-    Marquardt moves its boundary data toward it."""
+def reference_point(problem: DesignProblem, start: Start, run: Run
+                    ) -> Callable[[], np.ndarray]:
+    """The starting design's point (n,) of the NLP (the Miura-ori or the closed form),
+    transcribed when first asked for (its time counted as build time): where a warm start
+    breaks a constraint, Levenberg-Marquardt moves its boundary data toward it."""
 
     def point() -> np.ndarray:
         t1 = time.perf_counter()
