@@ -17,6 +17,7 @@ from rffqm_nlp.cli import app
 from rffqm_nlp.design.clearance import choose_axis, panel_corners
 from rffqm_nlp.contact.collisions import triangle_distance
 from rffqm_nlp.model.lengths import side_length_lp
+from rffqm_nlp.contact.thick import thick_collisions
 from rffqm_nlp.design.results import DesignResult, Fit
 
 from helpers import fit_is_finite
@@ -112,6 +113,24 @@ def test_check_a_fold_file_in_contact_exits_1_with_the_pairs(tmp_path):
     assert invoke("check", tmp_path / "random.fold").exit_code == 0
     early = invoke("check", tmp_path / "random.fold", "--clearance", THICKNESS, "--omega", 1.5)
     assert early.exit_code == 0, early.output
+
+
+def test_check_thick_panels_follows_the_thick_report(result, tmp_path):
+    """--thickness checks rffqm make's tapered panels (contact.thick.thick_collisions): the
+    verdict and first contact are the thick report's, free at a thin sheet and not at one
+    as thick as a panel."""
+    result.save(tmp_path / "run")
+    side = float(min(result.pattern.lh.min(), result.pattern.lv.min()))
+    for thickness, code in ((0.01 * side, 0), (2.0 * side, 1)):
+        report = thick_collisions(result.pattern, result.omega, thickness)
+        assert report.free == (code == 0)
+        res = invoke("check", tmp_path / "run", "--thickness", thickness)
+        assert res.exit_code == code, res.output
+        assert "thick panels" in res.output and "pairs sharing a vertex" in res.output
+        if report.first_omega is not None:
+            assert f"{report.first_omega:.6g}" in res.output
+    bad = invoke("check", tmp_path / "run", "--thickness", 0)
+    assert bad.exit_code == 2 and "--thickness must be" in bad.output
 
 
 @pytest.mark.parametrize("args, fragment", [

@@ -380,3 +380,25 @@ def test_displacement_view_slider_exaggerates_the_displacement():
     assert np.linalg.norm(moved, axis=1).max() == pytest.approx(0.1 * extent, rel=1e-9)
     assert fig["data"][0]["intensity"] == pytest.approx(
         (np.linalg.norm(response.displacement.reshape(-1, 3), axis=1) * 1e3).tolist())
+
+
+def test_command_locks_the_design_with_the_recommended_ties(tmp_path):
+    """--lock ties the sheet with rffqm make's lock: supported at one corner only, the
+    sheet's weight would fold it; locked, it holds, and the tie forces are reported."""
+    from typer.testing import CliRunner
+
+    from rffqm_nlp.cli.group import app
+    from rffqm_nlp.make.lock import lock_ties
+    from view_results import miura_result
+
+    result = miura_result(6, 1.3)
+    result.save(tmp_path / "design")
+    args = ["mechanics", str(tmp_path / "design"), "--support", "1,1", "--support", "1,2",
+            "--support", "2,1", "--fold-stiffness", "0"]
+    free = CliRunner().invoke(app, args)
+    assert free.exit_code == 2 and "free to fold" in free.output
+    locked = CliRunner().invoke(app, [*args, "--lock"])
+    assert locked.exit_code == 0, locked.output
+    count = len(lock_ties(result.pattern, result.omega))
+    forces = next(line for line in locked.output.splitlines() if "tie forces" in line)
+    assert count >= 1 and forces.count(",") == count - 1 and "no ties" not in forces

@@ -4,7 +4,8 @@ Commands: ``design`` (inverse design of a TOML target, with live solver progress
 (a study of many designs, one Dask task each, on a local cluster, an existing scheduler or
 serially; resumable; see :mod:`rffqm_nlp.sweeps`), ``fold``, ``export``, ``render`` and
 ``view`` (of a saved design result), ``check`` (self-contact of a saved design or a FOLD
-file, exit 1 when not free), ``mechanics`` (the bar-and-hinge model of a saved design:
+file, exit 1 when not free), ``make`` (cut and score files in mm, thick panels and a lock
+for a saved design), ``mechanics`` (the bar-and-hinge model of a saved design:
 stiffness, modes, Poisson's ratio, loads), ``targets`` (the built-in surfaces) and ``march``
 (forward marching of a perturbed Miura-ori).
 
@@ -26,7 +27,8 @@ folder or the complete new one.
 
 The command group and the order of the commands are in :mod:`.group`, one module per
 command or group of commands (:mod:`.design_command`, :mod:`.check_command`,
-:mod:`.sweep_command`, :mod:`.result_commands`, :mod:`.forward_commands`), the files they
+:mod:`.sweep_command`, :mod:`.result_commands`, :mod:`.forward_commands`,
+:mod:`.make_command`, :mod:`.mechanics_command`), the files they
 share in :mod:`.result_files`, the options' checks in :mod:`.options` and what they print in
 :mod:`.output`.
 """
@@ -37,6 +39,8 @@ from .check_command import CHECK_PAIRS, check_cmd
 from .design_command import CURVATURE_FILE, DESIGN_FORMATS, SOLVER_NAMES, design
 from .forward_commands import march, march_memory, targets
 from .group import app
+from .make_command import make_cmd
+from .mechanics_command import mechanics_cmd
 from .options import (ACUTE, FRAMES, MAX_FRAMES, MAX_NAME, MAX_PATH, MAX_WORKERS, OMEGA,
                       OUT_ROOM, PANELS, PERTURB, SEED, SIDE, TRUST_HELP, VIEW_FILE,
                       check_frames, check_path)
@@ -45,8 +49,8 @@ from .result_commands import export, fold_cmd, render, view_cmd
 from .sweep_command import sweep_cmd
 
 __all__ = ["ACUTE", "CHECK_PAIRS", "CURVATURE_FILE", "DESIGN_FORMATS", "FRAMES", "MAX_FRAMES",
-           "MAX_NAME", "MAX_PATH", "MAX_WORKERS", "OMEGA", "OUT_ROOM", "PANELS", "PERTURB",
-           "SEED", "SIDE", "SOLVER_NAMES", "TRUST_HELP", "VIEW_FILE", "app", "check_cmd",
-           "check_frames", "check_path", "console", "design", "export", "fold_cmd", "march",
-           "march_memory", "quantity_table", "render", "shown", "sweep_cmd", "targets",
-           "user_errors", "view_cmd", "warn", "wrote"]
+           "MAX_NAME", "MAX_PATH", "MAX_WORKERS", "OMEGA", "OUT_ROOM", "PANELS", "PERTURB", "SEED",
+           "SIDE", "SOLVER_NAMES", "TRUST_HELP", "VIEW_FILE", "app", "check_cmd", "check_frames",
+           "check_path", "console", "design", "export", "fold_cmd", "make_cmd", "march",
+           "march_memory", "mechanics_cmd", "quantity_table", "render", "shown", "sweep_cmd",
+           "targets", "user_errors", "view_cmd", "warn", "wrote"]

@@ -79,6 +79,8 @@ def mechanics_cmd(
                                       "repeat for more (default: the four corners)."),
     tie: list[str] = typer.Option([], "--tie", help="A tie i1,j1,i2,j2 between two vertices "
                                   "(the lock); repeat for more."),
+    lock: bool = typer.Option(False, "--lock", help="Tie the design with the lock that "
+                              "`rffqm make` recommends (its lock.csv), besides any --tie."),
     at: Optional[str] = typer.Option(None, "--at", help="Vertex i,j of the point stiffness "
                                      "(default: the middle vertex)."),
     modes: int = typer.Option(12, "--modes", help="Softest modes to list, 7 to 200."),
@@ -90,8 +92,9 @@ def mechanics_cmd(
     softest modes beside the folding mode's own stiffness, Poisson's ratio of the folding
     motion, and the linear response to the sheet's weight and the point loads: the
     largest deflection (mm), the stiffness against a point load at a vertex, the largest
-    bar strain and hinge moment. Exit status 2 on bad input or a state that the supports
-    and ties do not hold.
+    bar strain and hinge moment, with the ties given and, with ``--lock``, those of the lock
+    that ``rffqm make`` recommends (:func:`rffqm_nlp.make.lock.lock_ties`). Exit status 2
+    on bad input or a state that the supports and ties do not hold.
     """
     from ..mechanics import BarAndHinge, poisson_ratio
 
@@ -107,6 +110,11 @@ def mechanics_cmd(
         loads = [[i, j, *(rotation.T @ np.array(f))] for i, j, *f in loads] or None
         supports = [_numbers(t, 2, "--support") for t in support] or None
         ties = [np.reshape(_numbers(t, 4, "--tie"), (2, 2)) for t in tie]
+        if lock:
+            from ..make.lock import lock_ties
+
+            ties += [np.array([[t.i1, t.j1], [t.i2, t.j2]], dtype=float)
+                     for t in lock_ties(pat, result.omega)]
         vertex = _numbers(at, 2, "--at") if at else [pat.N // 2 + 1, pat.M // 2 + 1]
         model = BarAndHinge(pat, result.omega, sheet, width=width_m)
         found = model.modes(modes)
