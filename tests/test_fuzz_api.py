@@ -55,10 +55,11 @@ clearance = importlib.import_module("rffqm_nlp.design.clearance")
 # rq.make is the package called as its function make, so the package by its name
 make = importlib.import_module("rffqm_nlp.make")
 thick = importlib.import_module("rffqm_nlp.contact.thick")
+closed_form = importlib.import_module("rffqm_nlp.design.solvers.closed_form")
 
 #: The modules whose public callables are fuzzed.
 MODULES = (boundary, pattern, numpy_model, marching, vertex, lengths, shape, surfaces,
-           curvature, collisions, clearance, backend, mechanics, make, thick)
+           curvature, collisions, clearance, backend, mechanics, make, thick, closed_form)
 #: Longest time one call may take (seconds) before it counts as a hang.
 CALL_LIMIT = 20.0
 #: Result records: dataclasses that store what they are given and compute nothing (their
@@ -66,7 +67,8 @@ CALL_LIMIT = 20.0
 RECORDS = {"collisions.CollisionReport", "curvature.Curvature", "lengths.SideLengthSolution",
            "clearance.Closest", "mechanics.Modes", "mechanics.Response", "make.Made",
            "make.MakeOptions", "make.Sheet", "make.Stop", "make.Tie", "thick.ThickPanels",
-           "thick.ThickReport"}
+           "thick.ThickReport", "closed_form.ClosedForm", "closed_form.Separable",
+           "closed_form.CurvatureField"}
 
 
 # --------------------------------------------------------------------------- valid inputs
@@ -276,6 +278,28 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "clearance.panel_corners": (clearance.panel_corners, dict(N=2, M=3)),
     "clearance.choose_axis": (clearance.choose_axis, dict(P=TRIANGLES[0][[0, 1, 2, 2]],
                                                           Q=TRIANGLES[0][[0, 1, 2, 2]] + 1)),
+    # the closed-form start
+    "closed_form.closed_form_boundary": (closed_form.closed_form_boundary, dict(
+        kx=0.05, ky=-0.05, panels=(4, 4), size=(2.0, 2.0), alpha0=1.1, layout="zigzag_i",
+        omega=2.0, steps=None, min_angle=0.0, max_ratio=20.0)),
+    "closed_form.closed_form_design": (closed_form.closed_form_design, dict(
+        problem=_PROBLEM, omega=None)),
+    "closed_form.closed_form_start": (closed_form.closed_form_start, dict(
+        problem=_PROBLEM, omega=1.5)),
+    "closed_form.curvatures_along_lattice": (closed_form.curvatures_along_lattice, dict(
+        target=CAP, N=2, M=3)),
+    "closed_form.separable_curvatures": (closed_form.separable_curvatures, dict(
+        k_u=np.ones((3, 4)), k_v=np.zeros((3, 4)))),
+    "closed_form.lattice_steps": (closed_form.lattice_steps, dict(points=LATTICE)),
+    "closed_form.first_order_gains": (closed_form.first_order_gains, dict(
+        alpha0=1.1, omega_z=2.0)),
+    "closed_form.zigzag_gain": (closed_form.zigzag_gain, dict(
+        delta=np.array([0.0, 0.1]), alpha0=1.1, omega_z=2.0)),
+    "closed_form.straight_gain": (closed_form.straight_gain, dict(
+        Delta=np.array([0.0, 0.1]), delta=0.0, alpha0=1.1, omega_z=2.0)),
+    "closed_form.zigzag_fold": (closed_form.zigzag_fold, dict(omega=2.0, alpha0=1.1,
+                                                              delta=0.1)),
+    "closed_form.transposed": (closed_form.transposed, dict(bd=BD)),
     # making a design, thick panels
     "make.make": (make.make, dict(result=RESULT, width=100.0, thickness="0.2mm", ties=1)),
     "make.make_options": (make.make_options, dict(table={"width": "10cm"}, where="[make]",

@@ -137,7 +137,10 @@ def straight_gain(Delta: np.ndarray, delta: float, alpha0: float, omega_z: float
     (docs/closed_form.md s.4). Canonical frame: ``alpha0`` in (0, pi/2), ``omega_z`` in
     (0, pi), |delta| < alpha0, ``Delta`` finite numbers > -1; else :class:`InputError`."""
     alpha0, omega_z = _checked(alpha0, omega_z)
-    delta = float(_perturbation(delta, alpha0))
+    delta = _perturbation(delta, alpha0)
+    if delta.ndim:
+        raise InputError(f"delta must be one number, got shape {delta.shape}")
+    delta = float(delta)
     D = finite_array(Delta, "Delta")
     if np.any(D <= -1):
         raise InputError("Delta must be > -1 (the even rows' sides stay positive)")
