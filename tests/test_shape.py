@@ -6,6 +6,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import rffqm_nlp as rq
@@ -298,3 +300,48 @@ def test_distances_to_keep_the_points_shape_for_surfaces_and_point_sets():
     cloud = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     points = np.array([[[0.2, 0.0, 0.0], [1.0, 0.5, 0.0]]])
     np.testing.assert_allclose(rq.shape.distances_to(points, cloud), [[0.2, 0.5]], atol=1e-15)
+
+
+def reference_closest(surface, p: np.ndarray) -> tuple[np.ndarray, float]:
+    """The closest point of ``surface`` to p (3,) found independently: the nearest of a
+    401 x 401 sample, then scipy's bounded least squares on r(u, v) - p to its tightest
+    tolerances. Returns (u, v) and the distance."""
+    from scipy.optimize import least_squares
+
+    u, v = surface.grid_uv(401, 401)
+    sample = surface.sample(401, 401).reshape(-1, 3)
+    k = int(np.argmin(np.linalg.norm(sample - p, axis=1)))
+    (u0, u1), (v0, v1) = surface.domain
+    fit = least_squares(lambda x: surface.point(x[0], x[1]) - p, [u[k // 401], v[k % 401]],
+                        jac=lambda x: np.stack(surface.derivatives(x[0], x[1]), axis=1),
+                        bounds=([u0, v0], [u1, v1]), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    return fit.x, float(np.linalg.norm(surface.point(*fit.x) - p))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(["sphere_cap", "hyperboloid", "torus_patch", "quarter_vase", "saddle",
+                        "gaussian_bump"]),
+       st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(-0.05, 0.05),
+       st.floats(-0.03, 0.03), st.floats(-0.03, 0.03))
+def test_closest_points_agree_with_an_independent_projection(name, a, b, normal, du, dv):
+    """A point off the surface (a normal offset up to 5% of the diameter and a tangential
+    one, anywhere over the domain, its edges included): the closest point is no farther
+    than the one of a dense sample refined by scipy's least squares (to round-off; scipy
+    may stop short of it, not beyond), and the first-order conditions hold to round-off
+    (the gradient of the distance vanishes along every parameter not held on a bound)."""
+    surface = S.get(name)
+    (u0, u1), (v0, v1) = surface.domain
+    u, v = u0 + a * (u1 - u0), v0 + b * (v1 - v0)
+    diameter = surface.diameter()
+    r_u, r_v = surface.derivatives(u, v)
+    p = (surface.point(u, v) + normal * diameter * surface.normal(u, v)
+         + diameter * (du * r_u / np.linalg.norm(r_u) + dv * r_v / np.linalg.norm(r_v)))
+    uv, closest, dist = surface.closest_points(p)
+    _, expected = reference_closest(surface, p)
+    assert expected - 1e-8 * diameter <= dist <= expected + 1e-12 * diameter
+    assert dist == pytest.approx(np.linalg.norm(closest - p), abs=1e-15 * diameter)
+    np.testing.assert_allclose(closest, surface.point(*uv), atol=1e-14 * diameter)
+    e = closest - p
+    for k, (t, lo, hi) in enumerate(zip(surface.derivatives(*uv), (u0, v0), (u1, v1))):
+        if lo < uv[k] < hi:
+            assert abs(e @ t) <= 1e-13 * diameter * np.linalg.norm(t)

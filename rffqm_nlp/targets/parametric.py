@@ -49,8 +49,17 @@ mathlib = backend.math_for
 
 #: Grid (per direction) on which a new surface is checked to be finite and regular.
 _CHECK_GRID = 21
-#: Grid (per direction) of the sample whose largest point distance is the diameter.
-_DIAMETER_GRID = 101
+#: Grid (per direction) of the sample whose largest point distance is the diameter and
+#: whose nearest point starts :meth:`Surface.closest_points` at its default resolution.
+SAMPLE_GRID = 101
+#: Newton steps of :meth:`Surface.closest_points` at most, and step halvings in each.
+NEWTON_STEPS, HALVINGS = 100, 30
+#: A point has converged when its step moves it by at most this fraction of the domain.
+CONVERGED = 1e-15
+#: Steps up to this fraction of the domain are taken without asking that they bring the point
+#: closer: Newton's model is exact to round-off there, and the distance, flat to second order
+#: about the closest point, can no longer be told apart from its rounding.
+SMALL_STEP = 1e-8
 #: |r_u x r_v| below this times mean |r_u| * mean |r_v| counts as singular.
 _REGULARITY_TOL = 1e-9
 #: ``domain = [[u0, u1], [v0, v1]]`` of a [target] table.
@@ -94,7 +103,7 @@ class Surface:
     # -- the AD graph -------------------------------------------------------------------
     @cached_property
     def _functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
-        """(r, geometry, first derivatives) CasADi Functions of (u, v), built once from one
+        """(r, geometry, second derivatives) CasADi Functions of (u, v), built once from one
         SX graph."""
         u, v = ca.SX.sym("u"), ca.SX.sym("v")
         r = ca.vertcat(*self._r(u, v))
@@ -111,8 +120,9 @@ class Surface:
         geometry = ca.Function(
             "geometry", [u, v], [r, r_u, r_v, n, ca.vertcat(e, f, g, l, m, nn), k, h],
             ["u", "v"], ["r", "r_u", "r_v", "n", "forms", "K", "H"])
-        first = ca.Function("first", [u, v], [r, r_u, r_v], ["u", "v"], ["r", "r_u", "r_v"])
-        return point, geometry, first
+        second = ca.Function("second", [u, v], [ca.vertcat(r, r_u, r_v, r_uu, r_uv, r_vv)],
+                             ["u", "v"], ["derivatives"])
+        return point, geometry, second
 
     def casadi_function(self) -> ca.Function:
         """The CasADi Function (u, v) -> r (3x1), for use inside other CasADi graphs."""
@@ -209,7 +219,18 @@ class Surface:
 
     @cached_property
     def _diameter(self) -> float:
-        return point_set_diameter(self.sample(_DIAMETER_GRID, _DIAMETER_GRID))
+        return point_set_diameter(self._reference_sample)
+
+    @cached_property
+    def _reference_sample(self) -> np.ndarray:
+        """The :data:`SAMPLE_GRID` x :data:`SAMPLE_GRID` :meth:`sample` (cached): the
+        diameter's points and the start of :meth:`closest_points`."""
+        return self.sample(SAMPLE_GRID, SAMPLE_GRID)
+
+    @cached_property
+    def _reference_tree(self) -> cKDTree:
+        """A k-d tree on the points of :attr:`_reference_sample` (cached)."""
+        return cKDTree(self._reference_sample.reshape(-1, 3))
 
     def lattice_uv(self, N: int, M: int,
                    spacing: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -260,15 +281,15 @@ class Surface:
         u, v = self.lattice_uv(N, M, spacing)
         return self.point(u[:, None], v[None, :])
 
-    def closest_points(self, points: Any, resolution: int = 101
+    def closest_points(self, points: Any, resolution: int = SAMPLE_GRID
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest points of the surface (over its domain) to ``points`` (..., 3).
 
-        A nearest-neighbour search on the (resolution x resolution) :meth:`sample` gives the
-        start, then projected Gauss-Newton on |r(u, v) - p|^2 with the AD derivatives and the
-        domain as box constraints converges to the closest point (to round-off for points
-        whose closest point is regular). Returns (uv (..., 2), closest (..., 3),
-        distances (...)).
+        A nearest-neighbour search on the (resolution x resolution) :meth:`sample` (cached
+        at the default resolution) gives the start, then Newton's method on |r(u, v) - p|^2
+        with the AD derivatives and the domain as box constraints converges to the closest
+        point, to round-off for points whose closest point is regular
+        (:meth:`_project`). Returns (uv (..., 2), closest (..., 3), distances (...)).
         """
         pts = finite_array(points, "points", allowed="a finite array of shape (..., 3)",
                            error=SurfaceError)
@@ -278,56 +299,56 @@ class Surface:
         shape, pts = pts.shape[:-1], pts.reshape(-1, 3)
         resolution = checked_value(resolution, GRID, "resolution")
         refuse_points(resolution * resolution, 12, f"a {resolution} x {resolution} sample")
+        tree = (self._reference_tree if resolution == SAMPLE_GRID
+                else cKDTree(self.sample(resolution, resolution).reshape(-1, 3)))
         u, v = self.grid_uv(resolution, resolution)
-        _, idx = cKDTree(self.sample(resolution, resolution).reshape(-1, 3)).query(pts)
-        uu, vv = u[idx // resolution], v[idx % resolution]
-        active = np.arange(uu.size)  # the points still moving
-        for _ in range(100):
-            new_u, new_v, moved = self._projection_step(pts[active], uu[active], vv[active])
-            uu[active], vv[active] = new_u, new_v
-            active = active[moved > 1e-15]
-            if active.size == 0:
-                break
-        closest = self.point(uu, vv)
+        idx = tree.query(pts)[1] if len(pts) else np.zeros(0, dtype=np.int64)
+        uv, closest = self._project(pts, u[idx // resolution], v[idx % resolution])
         with np.errstate(all="ignore"):
             dist = np.linalg.norm(closest - pts, axis=1)
         finite_result(dist, "the distances to the surface overflow: the points are too far "
                             "from it for floating point")
-        return (np.stack([uu, vv], -1).reshape(shape + (2,)), closest.reshape(shape + (3,)),
-                dist.reshape(shape))
+        return (uv.reshape(shape + (2,)), closest.reshape(shape + (3,)), dist.reshape(shape))
 
-    def _projection_step(self, pts: np.ndarray, uu: np.ndarray, vv: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One projected Gauss-Newton step with step halving for points (n, 3) at (u, v)
-        (n,) each; returns (u, v, each point's move relative to the domain size)."""
+    def _derivatives(self, uu: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        """(r, r_u, r_v, r_uu, r_uv, r_vv) at (u, v) (n,) each: (6, n, 3)."""
+        _, (out,) = self._evaluate(self._functions[2], uu, vv)
+        return out.reshape(6, 3, -1).transpose(0, 2, 1)
+
+    def _project(self, pts: np.ndarray, uu: np.ndarray, vv: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The closest points to ``pts`` (n, 3) from the starts (u, v) (n,): their (u, v)
+        (n, 2) and r(u, v) (n, 3). Projected Newton steps (:func:`_newton_steps`) with step
+        halving, in one evaluation of the derivatives at all the points still moving per
+        step, until a step moves a point by at most :data:`CONVERGED` of the domain."""
         (u0, u1), (v0, v1) = self.domain
-        _, (r, r_u, r_v) = self._evaluate(self._functions[2], uu, vv)
-        r, r_u, r_v = r.T, r_u.T, r_v.T
-        res = r - pts
-        g_u, g_v = np.sum(r_u * res, 1), np.sum(r_v * res, 1)
-        e, f, g = np.sum(r_u * r_u, 1), np.sum(r_u * r_v, 1), np.sum(r_v * r_v, 1)
-        det = e * g - f * f
-        du, dv = -(g * g_u - f * g_v) / det, -(e * g_v - f * g_u) / det
-        # a bound is active where the point sits on it and descent leads outside
-        fix_u = ((uu <= u0) & (g_u > 0)) | ((uu >= u1) & (g_u < 0))
-        fix_v = ((vv <= v0) & (g_v > 0)) | ((vv >= v1) & (g_v < 0))
-        du, dv = np.where(fix_v, -g_u / e, du), np.where(fix_u, -g_v / g, dv)
-        du, dv = np.where(fix_u, 0.0, du), np.where(fix_v, 0.0, dv)
-        dist = np.linalg.norm(res, axis=1)
-        t = np.ones_like(uu)
-        new_u, new_v = uu.copy(), vv.copy()
-        todo = np.arange(uu.size)  # the points whose step is not yet accepted
-        for _ in range(30):
-            cu = np.clip(uu[todo] + t[todo] * du[todo], u0, u1)
-            cv = np.clip(vv[todo] + t[todo] * dv[todo], v0, v1)
-            ok = np.linalg.norm(self.point(cu, cv) - pts[todo], axis=1) <= dist[todo]
-            new_u[todo[ok]], new_v[todo[ok]] = cu[ok], cv[ok]
-            todo = todo[~ok]
-            if todo.size == 0:
+        span = np.array([u1 - u0, v1 - v0])
+        uv = np.stack([uu, vv], axis=1).astype(float)
+        der = self._derivatives(uv[:, 0], uv[:, 1])
+        active = np.arange(len(pts))  # the points still moving
+        for _ in range(NEWTON_STEPS):
+            step = _newton_steps(der[:, active], pts[active], uv[active], self.domain)
+            move = np.max(np.abs(step) / span, axis=1)
+            active, step, move = active[move > CONVERGED], step[move > CONVERGED], \
+                move[move > CONVERGED]
+            if active.size == 0:
                 break
-            t[todo] /= 2
-        return new_u, new_v, np.maximum(np.abs(new_u - uu) / (u1 - u0),
-                                        np.abs(new_v - vv) / (v1 - v0))
+            dist = np.linalg.norm(der[0, active] - pts[active], axis=1)
+            t = np.ones(len(active))
+            todo = np.arange(len(active))  # the points whose step is not yet taken
+            for _ in range(HALVINGS):
+                k = active[todo]
+                trial = np.clip(uv[k] + t[todo, None] * step[todo], (u0, v0), (u1, v1))
+                new = self._derivatives(trial[:, 0], trial[:, 1])
+                ok = ((np.linalg.norm(new[0] - pts[k], axis=1) <= dist[todo])
+                      | (t[todo] * move[todo] <= SMALL_STEP))
+                uv[k[ok]], der[:, k[ok]] = trial[ok], new[:, ok]
+                todo = todo[~ok]
+                if todo.size == 0:
+                    break
+                t[todo] /= 2
+            active = np.setdiff1d(active, active[todo], assume_unique=True)  # stuck: done
+        return uv, der[0]
 
     # -- configuration ------------------------------------------------------------------
     def to_config(self) -> dict:
@@ -348,6 +369,31 @@ class Surface:
             raise SurfaceError(
                 f"surface {self.name!r} is singular (r_u x r_v = 0) at (u, v) = "
                 f"({uu.flat[k]:.6g}, {vv.flat[k]:.6g}); shrink or move the domain {self.domain}")
+
+
+def _newton_steps(der: np.ndarray, pts: np.ndarray, uv: np.ndarray, domain: Domain
+                 ) -> np.ndarray:
+    """Steps (n, 2) in (u, v) towards the closest points of r to ``pts`` (n, 3) from the
+    parameters ``uv`` (n, 2), where ``der`` (6, n, 3) holds (r, r_u, r_v, r_uu, r_uv, r_vv):
+    Newton's step on f = |r - p|^2 / 2 (gradient g = (r_u . e, r_v . e), e = r - p; Hessian
+    the first form plus e . r_uu, e . r_uv, e . r_vv) where that Hessian is positive
+    definite, else the Gauss-Newton step (the first form alone). A parameter on a bound of
+    ``domain`` whose gradient points out of the domain stays there (the step solves for the
+    other parameter alone)."""
+    r, r_u, r_v, r_uu, r_uv, r_vv = der
+    e = r - pts
+    g_u, g_v = np.sum(r_u * e, 1), np.sum(r_v * e, 1)
+    E, F, G = np.sum(r_u * r_u, 1), np.sum(r_u * r_v, 1), np.sum(r_v * r_v, 1)
+    h_uu, h_uv, h_vv = E + np.sum(e * r_uu, 1), F + np.sum(e * r_uv, 1), G + np.sum(e * r_vv, 1)
+    newton = (h_uu > 0) & (h_uu * h_vv - h_uv * h_uv > 0)
+    h_uu, h_uv, h_vv = (np.where(newton, h, f) for h, f in ((h_uu, E), (h_uv, F), (h_vv, G)))
+    det = h_uu * h_vv - h_uv * h_uv
+    du, dv = -(h_vv * g_u - h_uv * g_v) / det, -(h_uu * g_v - h_uv * g_u) / det
+    (u0, u1), (v0, v1) = domain
+    fix_u = ((uv[:, 0] <= u0) & (g_u > 0)) | ((uv[:, 0] >= u1) & (g_u < 0))
+    fix_v = ((uv[:, 1] <= v0) & (g_v > 0)) | ((uv[:, 1] >= v1) & (g_v < 0))
+    du, dv = np.where(fix_v, -g_u / h_uu, du), np.where(fix_u, -g_v / h_vv, dv)
+    return np.stack([np.where(fix_u, 0.0, du), np.where(fix_v, 0.0, dv)], axis=1)
 
 
 def checked_value(value: Any, key: Key, name: str) -> Any:
