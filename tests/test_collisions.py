@@ -8,7 +8,7 @@ import importlib
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
@@ -18,10 +18,10 @@ from rffqm_nlp.contact import broad, motion
 from rffqm_nlp.contact.collisions import (CollisionReport, collisions, near_pairs,
                                           panel_distance, triangle_distance,
                                           triangles_intersect)
-from rffqm_nlp.contact.motion import motion_bound
+from rffqm_nlp.contact.motion import frame_bound, pair_bound
 from rffqm_nlp.contact.narrow import distance, lower_bound
 from rffqm_nlp.contact.panels import Geometry, States
-from rffqm_nlp.errors import InputError
+from rffqm_nlp.errors import InputError, MarchingError
 from rffqm_nlp.model.lengths import side_length_lp
 
 
@@ -281,9 +281,10 @@ def test_random_recipe_free_agrees_with_dense_scan():
 
 def test_cheap_bounds_hold_on_the_random_recipe():
     """Every pair sharing no vertex, at every coarse state of a random-recipe pattern: the
-    cheap lower bound never exceeds the exact distance; the motion bound between two
-    states is at least the change of the exact distance and at most the largest relative
-    displacement over the 16 vertex pairs (brute force)."""
+    cheap lower bound never exceeds the exact distance; between two states, the motion
+    bounds (the frame bound and the vertex pairs') are each at least the change of the
+    exact distance, the vertex pairs' is the largest relative displacement over the 16
+    vertex pairs (brute force), and the frame bound is often far smaller."""
     pat = random_recipe(22)
     geo = Geometry(pat)
     states = States(geo, 1.0, np.linspace(0.0, 2.5, 11))
@@ -302,16 +303,18 @@ def test_cheap_bounds_hold_on_the_random_recipe():
     dP = Q[4, p] - Q[3, p]
     dQ = Q[4, q] - Q[3, q]
     brute = np.linalg.norm(dQ[:, None, :, :] - dP[:, :, None, :], axis=3).max(axis=(1, 2))
-    m = motion_bound(states, a, b, p, q)
+    framed, paired = frame_bound(states, a, b, p, q), pair_bound(states, a, b, p, q)
     change = np.abs(distance(states, b, p, q) - distance(states, a, p, q))
-    assert np.all(change <= m + 1e-12) and np.all(m <= brute * (1 + 1e-12))
-    assert np.mean(m < 0.5 * brute) > 0.1          # the panel frames do better for some
+    assert np.all(change <= framed + 1e-12) and np.all(change <= paired + 1e-12)
+    np.testing.assert_allclose(paired, brute, rtol=1e-12)
+    assert np.mean(framed < 0.5 * brute) > 0.1     # the panel frames do better for some
 
 
 def coarse_rows(geo: Geometry, states: States, K: int, clearance: float):
     """The broad phase's rows (n, 4) and bounds (n,) of every step between the first K
     states, its chunks put together."""
-    chunks = [c for a in range(K - 1) for c in broad.coarse_rows(geo, states, a, clearance)]
+    chunks = [c for a in range(K - 1)
+              for c in broad.coarse_rows(geo, states, broad.step(geo, states, a, a + 1, clearance))]
     return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 
@@ -333,8 +336,8 @@ def test_coarse_rows_cover_every_pair_the_bounds_do_not_clear(make, seed, cleara
     states = States(geo, 1.0, np.linspace(0.0, 2.4, K))
     if rows_at_once:
         monkeypatch.setattr(broad, "ROWS", rows_at_once)
-        chunks = [len(r) for a in range(K - 1)
-                  for r, _ in broad.coarse_rows(geo, states, a, clearance)]
+        chunks = [len(r) for a in range(K - 1) for r, _ in
+                  broad.coarse_rows(geo, states, broad.step(geo, states, a, a + 1, clearance))]
         assert len(chunks) > 2 * (K - 1) and max(chunks) <= rows_at_once
     rows, m = coarse_rows(geo, states, K, clearance)
     got = {tuple(r): b for r, b in zip(rows.tolist(), m)}
@@ -557,3 +560,92 @@ def test_clearance_helpers_refuse_bad_arguments():
             call()
     pairs, worst = clearance.closest(pat, 1.0, 0.01)
     assert pairs.shape[1] == 2 and (worst.pair is None) == (len(pairs) == 0)
+
+
+# --------------------------------------------------------------------------- halving, blocks
+
+def report_with(pat, omega_max, clearance, monkeypatch, split, one_query):
+    """The report with motion.SPLIT_REACH = split and broad.ONE_QUERY = one_query, and the
+    number of steps the broad phase looked at."""
+    monkeypatch.setattr(motion, "SPLIT_REACH", split)
+    monkeypatch.setattr(broad, "ONE_QUERY", one_query)
+    calls = []
+    step = broad.step
+    monkeypatch.setattr(broad, "step", lambda *a: calls.append(1) or step(*a))
+    return collisions(pat, omega_max, clearance=clearance), len(calls)
+
+
+@pytest.mark.parametrize("make, seed, clearance, omega_max", [
+    (random_recipe, 29, 0.003, 2.5), (random_recipe, 22, 0.0015, -3.0),   # in contact
+    (random_recipe, 22, 0.0, 2.0), (random_recipe, 16, 0.03, 2.4),
+    (perturbed_miura, 0, 0.4, 3.0), (perturbed_miura, 1, 0.2, -3.0)])
+def test_halving_far_steps_and_blocks_keep_the_report(make, seed, clearance, omega_max,
+                                                      monkeypatch):
+    """Halving the steps whose reaches are far (motion.SPLIT_REACH: never, by default, or
+    nearly every step) and the tree queries (one a step, or blocks of panels of similar
+    reach, broad.ONE_QUERY) give the same report: the halves are the ones the refinement
+    follows, so the samples that can report a contact are the same."""
+    pat = make(seed)
+    plain, n_plain = report_with(pat, omega_max, clearance, monkeypatch, np.inf, 10 ** 12)
+    default, _ = report_with(pat, omega_max, clearance, monkeypatch, 2.0, 2 ** 17)
+    halved, n_halved = report_with(pat, omega_max, clearance, monkeypatch, 0.25, 0)
+    assert default == plain and halved == plain
+    assert n_halved > n_plain
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 1000), st.floats(0.0, 0.12), st.sampled_from([0.0, 0.05, 0.3]),
+       st.sampled_from([2.5, -2.5, 3.1]))
+def test_halving_keeps_the_report_of_perturbed_miuras(seed, perturbation, clearance, omega_max):
+    """Perturbed Miura-ori (5 x 6, angles perturbed by up to 0.12 pi; in contact or free):
+    the same report with every far step halved as without halving."""
+    try:
+        pat = nm.march(rq.perturb_angles(rq.miura_boundary(5, 6, alpha0=1.1),
+                                         perturbation * np.pi, seed))
+    except MarchingError:
+        assume(False)
+    with pytest.MonkeyPatch.context() as mp:
+        plain, _ = report_with(pat, omega_max, clearance, mp, np.inf, 10 ** 12)
+        halved, _ = report_with(pat, omega_max, clearance, mp, 0.25, 0)
+    assert halved == plain
+
+
+@pytest.mark.parametrize("make, seed, clearance", [(random_recipe, 29, 0.0),
+                                                   (random_recipe, 16, 0.05),
+                                                   (perturbed_miura, 0, 0.2)])
+def test_blocks_of_similar_reach_give_the_rows_of_one_query(make, seed, clearance,
+                                                            monkeypatch):
+    """The tree queries by blocks of panels of similar reach (broad.CLASS) keep exactly the
+    rows and bounds of one query a step."""
+    pat = make(seed)
+    geo = Geometry(pat)
+    omegas = np.linspace(0.0, 2.4, 9)
+
+    def rows_with(one_query: int):
+        monkeypatch.setattr(broad, "ONE_QUERY", one_query)
+        rows, m = coarse_rows(geo, States(geo, 1.0, omegas), len(omegas), clearance)
+        order = np.lexsort(rows.T[::-1])
+        return rows[order], m[order]
+
+    one, blocks = rows_with(10 ** 12), rows_with(0)
+    assert len(one[0]) > 0
+    np.testing.assert_array_equal(one[0], blocks[0])
+    np.testing.assert_array_equal(one[1], blocks[1])
+
+
+def test_panel_frames_are_orthonormal_along_the_first_edge():
+    """The frames of the panel table (rows: the axis along a -> b made normal to the
+    panel's normal, the normal's cross product with it, the normal) at every state."""
+    pat = random_recipe(22)
+    geo = Geometry(pat)
+    states = States(geo, 1.0, np.linspace(0.0, 2.5, 6))
+    s, p = np.repeat(np.arange(6), pat.N * pat.M), np.tile(np.arange(pat.N * pat.M), 6)
+    F, Q, n = states.frames(s, p), states.quads(s, p), states.normals(s, p)
+    np.testing.assert_allclose(F @ F.transpose(0, 2, 1), np.broadcast_to(np.eye(3), F.shape),
+                               atol=1e-12)
+    np.testing.assert_array_equal(F[:, 2], n)
+    edge = Q[:, 1] - Q[:, 0]
+    along = edge - np.sum(edge * n, axis=1)[:, None] * n
+    np.testing.assert_allclose(F[:, 0], along / np.linalg.norm(along, axis=1)[:, None],
+                               atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(F), 1.0, atol=1e-12)

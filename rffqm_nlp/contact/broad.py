@@ -1,6 +1,6 @@
-"""Broad phase of the contact checks: the panel pairs a coarse step of the motion must look at.
+"""Broad phase of the contact checks: the panel pairs a step of the motion must look at.
 
-:func:`coarse_rows` gives, for a coarse step [w0, w1], every pair that the step's sphere
+:func:`coarse_rows` gives, for a step [w0, w1] (:class:`Step`), every pair that the step's sphere
 gaps g(w0), g(w1) (centre distance minus both radii) and its cheapest motion bound m do
 not certify clear, (g(w0) + g(w1) - m) / 2 <= clearance, however far apart, by
 :class:`scipy.spatial.cKDTree` queries on the panel centres at w0.
@@ -11,15 +11,18 @@ not certify clear, (g(w0) + g(w1) - m) / 2 <= clearance, however far apart, by
   pair has g(w0) <= G_p + G_q with a reach per panel G_p = (clearance + (SAFETY + 1)
   (L r_p + |e_p|) + SAFETY s_p) / (2 - (SAFETY + 1) L) (r its radius, s its spin: its
   largest vertex displacement about its centre; :func:`reach`). The tree queries find
-  the centres within r_p + G_p + r_q + G_q (blocks of panels queried against the panels
-  from the block on: in the grid's order when r + G is nearly the same for all, else by
-  decreasing r + G, so that very unequal reaches do not make every query large). A
+  the centres within r_p + G_p + r_q + G_q (one query with twice the largest, or blocks
+  of panels queried against the panels from the block on: in the grid's order when
+  r + G is nearly the same for all, else by decreasing r + G in blocks of similar
+  r + G, so that very unequal reaches do not make every query large). A
   folding sheet's centres move nearly affinely over a short step, so the reaches are a
   fraction of a panel. Every gap is lowered, every bound raised, by a small slack (a
   bound on the rounding).
 * Tiles: near flat, though, a large sheet bends: one affine map misfits its
   displacements by about the same length whatever the panels' size, so the reaches grow
-  to many panels (docs/collisions.md). In such a step (the median reach above
+  to many panels (docs/collisions.md). The motion halves such steps
+  (:func:`~rffqm_nlp.contact.motion.steps`) down to ``tol``; in one still left (the
+  median reach above
   ``TILE_REACH`` panel radii), from ``MIN_TILES`` tiles of ``TILE`` x ``TILE`` panels on,
   each tile gets its own fit (:func:`local_pairs`): the bound above holds for any affine
   map, so a pair (p, q) with p in a tile and both residuals measured against that tile's
@@ -34,6 +37,8 @@ The broad phase adds no assumption to the motion's (:mod:`~rffqm_nlp.contact.mot
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -54,6 +59,11 @@ ROWS = 2 ** 18
 #: their largest radius plus reach is at most this times the smallest, else by decreasing
 #: radius plus reach (blocks of big panels queried with a big radius, the rest small).
 SPREAD = 1.5
+#: ... and then in blocks of panels whose radius plus reach is within this factor of the
+#: block's largest (each block's query radius is twice its largest), unless the pattern
+#: has at most ONE_QUERY pairs: then one query a step costs less than the blocks' trees.
+CLASS = 1.3
+ONE_QUERY = 2 ** 17
 
 #: Panels a side of the grid's tiles, each with its own affine fit of a coarse step's
 #: displacements in the broad phase (:func:`local_pairs`), used from MIN_TILES tiles on
@@ -66,35 +76,65 @@ MIN_TILES = 4
 TILE_REACH = 2.0
 
 
-def coarse_rows(geo: Geometry, st: States, a: int, clearance: float):
-    """The rows (n, 4) = (a, a + 1, p, q) of the coarse step from state a to a + 1 of
-    ``st``: every pair that the sphere gaps g(a), g(a + 1) and the rows' motion bound m do
-    not certify clear, (g(a) + g(a + 1) - m) / 2 <= clearance; with those bounds m (n,),
-    SAFETY times the centres' relative displacement plus each panel's largest vertex
-    displacement about its centre (at least :func:`~rffqm_nlp.contact.motion.motion_bound`'s).
-    In chunks (rows, m) of at most ROWS pairs, from the tree queries of
-    :func:`_close_pairs` with the panels' reaches of :func:`reach`, or, where those are
-    far (TILE_REACH) and from MIN_TILES tiles on, of :func:`local_pairs`."""
-    start, end = st.panels(a), st.panels(a + 1)
+@dataclass(frozen=True, eq=False)
+class Step:
+    """A step of the motion from state ``a`` to state ``b`` of a :class:`States`, with what
+    its broad phase reads: the panels' centres ``C`` (3, P) at a, their displacements ``D``
+    (3, P) to b, their ``spin`` (P,) (largest vertex displacement about the centre), their
+    reaches ``G`` (P,) (:func:`reach`), the ``clearance`` and ``eps``, a bound on the
+    rounding of the gaps and displacements (:func:`_slack`); ``radius`` the median panel
+    radius."""
+
+    a: int
+    b: int
+    C: np.ndarray
+    D: np.ndarray
+    spin: np.ndarray
+    G: np.ndarray
+    clearance: float
+    eps: float
+    radius: float
+
+    def far(self, times: float) -> bool:
+        """Whether the median reach exceeds ``times`` the median panel radius: how far the
+        step's motion is from one affine map, in panels."""
+        return bool(np.median(self.G) > times * self.radius)
+
+
+def step(geo: Geometry, st: States, a: int, b: int, clearance: float) -> Step:
+    """The :class:`Step` from state ``a`` to state ``b`` of ``st``."""
+    start, end = st.panels(a), st.panels(b)
     C, D = start.centre, end.centre - start.centre                  # (3, P)
     dQ = (end.corners - start.corners) - D[:, None]                 # (3, 4, P)
     spin = most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
-    r = geo.radius
-    G = reach(C, D, spin, r, clearance)
+    G = reach(C, D, spin, geo.radius, clearance)
     eps = _slack(geo, np.stack([C, end.centre])) + 1e-5 * float(G.max())
-    far = np.median(G) > TILE_REACH * np.median(r)
-    grid = tiles(geo) if far else None
-    pairs = (local_pairs(geo, grid, C, D, spin, r + G, clearance, eps)
+    return Step(a, b, C, D, spin, G, clearance, eps, float(np.median(geo.radius)))
+
+
+def coarse_rows(geo: Geometry, st: States, s: Step):
+    """The rows (n, 4) = (a, b, p, q) of the step ``s`` from state a to b of ``st``: every
+    pair that the sphere gaps g(a), g(b) and the rows' motion bound m do not certify clear,
+    (g(a) + g(b) - m) / 2 <= clearance; with those bounds m (n,), SAFETY times the
+    centres' relative displacement plus each panel's largest vertex displacement about its
+    centre (at least :func:`~rffqm_nlp.contact.motion.pair_bound`'s). In chunks (rows, m)
+    of at most ROWS pairs, from the tree queries of :func:`_close_pairs` with the panels'
+    reaches of :func:`reach`, or, where those are far (TILE_REACH) and from MIN_TILES tiles
+    on, of :func:`local_pairs`."""
+    end = st.panels(s.b).centre
+    C, D, spin, r, eps, clearance = s.C, s.D, s.spin, geo.radius, s.eps, s.clearance
+    grid = tiles(geo) if s.far(TILE_REACH) else None
+    pairs = (local_pairs(geo, grid, C, D, spin, r + s.G, clearance, eps)
              if grid is not None and len(grid[2]) >= MIN_TILES
-             else _close_pairs(geo, C.T, r + G, 2 * eps))
+             else _close_pairs(geo, C.T, r + s.G, 2 * eps))
     for p, q, dist in pairs:
         rp, rq = r.take(p), r.take(q)
         m = SAFETY * (column_norm(D.take(p, axis=1) - D.take(q, axis=1))
                       + spin.take(p) + spin.take(q))
         g0 = dist - rp - rq
-        g1 = column_norm(end.centre.take(p, axis=1) - end.centre.take(q, axis=1)) - rp - rq
+        g1 = column_norm(end.take(p, axis=1) - end.take(q, axis=1)) - rp - rq
         kept = np.flatnonzero((g0 + g1 - m) / 2 <= clearance + 2 * eps)
-        rows = np.stack([np.full(len(kept), a), np.full(len(kept), a + 1), p[kept], q[kept]],
+        rows = np.stack([np.full(len(kept), s.a), np.full(len(kept), s.b), p[kept], q[kept]],
                         axis=1)
         yield rows, m[kept] + eps
 
@@ -135,16 +175,14 @@ def reach(C: np.ndarray, D: np.ndarray, spin: np.ndarray, r: np.ndarray,
     E = D - D.mean(axis=1, keepdims=True)                           # t = mean(D) - A mean(C)
     lam, U = np.linalg.eigh(X @ X.T)                                # X's principal directions
     U, lam, EX = U[:, ::-1], lam[::-1], E @ X.T                     # largest first
-    best = None
-    for k in range(4):                           # A = E X^T U_k diag(1 / lam_k) U_k^T
-        A = (EX @ U[:, :k] / np.where(lam[:k] > 0, lam[:k], np.inf)) @ U[:, :k].T
-        L = float(np.linalg.norm(A, 2))
-        if (SAFETY + 1) * L >= 2:
-            continue
-        G = _fit_reach(L, r, norm((E - A @ X).T), spin, clearance)
-        if best is None or (r + G).max() < (r + best).max():
-            best = G
-    return best
+    A = np.stack([(EX @ U[:, :k] / np.where(lam[:k] > 0, lam[:k], np.inf)) @ U[:, :k].T
+                  for k in range(4)])                # A = E X^T U_k diag(1 / lam_k) U_k^T
+    L = np.linalg.norm(A, 2, axis=(1, 2))
+    ok = (SAFETY + 1) * L < 2                        # k = 0 (A = 0) always is
+    V = E - A[ok] @ X                                # (k, 3, P)
+    e = np.sqrt(V[:, 0] * V[:, 0] + V[:, 1] * V[:, 1] + V[:, 2] * V[:, 2])
+    G = _fit_reach(L[ok, None], r, e, spin, clearance)
+    return G[int(np.argmin((r + G).max(axis=1)))]
 
 
 def _slack(geo: Geometry, C: np.ndarray) -> float:
@@ -159,26 +197,24 @@ def _slack(geo: Geometry, C: np.ndarray) -> float:
 def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
     """The pairs p < q sharing no vertex whose centres C (P, 3) are at most R_p + R_q +
     ``slack`` apart (R (P,) >= 0), with those distances, in chunks (p, q, dist) (n,) of at
-    most ROWS pairs. Panels by decreasing R; the first 64 (or fewer, halved until the
-    tree counts at most ROWS pairs within twice the largest R of them) estimate the pairs
-    per panel. When one query with twice the largest R is expected to give at most
-    0.7 ROWS pairs, that query; otherwise each pair is found once, from the panel with the
-    larger R: a block of panels queried (a tree of its own) against a tree on the panels
-    from the block on, with twice the block's largest R, each block sized from the pairs
-    per panel of the last query for 0.7 ROWS (the query radius only shrinks)."""
-    order = (np.arange(len(R)) if R.max() <= SPREAD * R.min()
-             else np.argsort(-R, kind="stable"))
+    most ROWS pairs. When R varies by at most SPREAD, the panels in the grid's order. One
+    query with twice the largest R when R varies by at most SPREAD or the pattern has at
+    most ONE_QUERY pairs, and the first 64 (or fewer, halved until the tree counts at most
+    ROWS pairs within twice the largest R of them) let it expect at most 0.7 ROWS pairs
+    (all pairs fit in ROWS: no count). Otherwise each pair is found once, from the panel with the larger R:
+    panels by decreasing R, a block of them queried (a tree of its own) against a tree on
+    the panels from the block on, with twice the block's largest R; a block holds panels
+    whose R is within CLASS of its first's (so that a few large panels do not make every
+    query large), as many as the pairs per panel of the last query (or the first 64's)
+    allow for 0.7 ROWS pairs."""
+    uniform = R.max() <= SPREAD * R.min()
+    order = np.arange(len(R)) if uniform else np.argsort(-R, kind="stable")
     X, R, ij = C[order], R[order], geo.ij[order]
     top = np.maximum.accumulate(R[::-1])[::-1]          # the largest R from each on
-    P, c0, base, size = len(X), 0, 0, 64
+    P, c0, base = len(X), 0, 0
     rest = cKDTree(X)
-    while True:
-        head = cKDTree(X[:size])
-        found = head.count_neighbors(rest, 2 * float(top[0]) + slack)
-        if size == 1 or found <= ROWS:
-            break
-        size //= 2
-    if found * P / min(size, P) <= 1.4 * ROWS:   # ordered pairs, self included: one query
+    found, size = _first_block(rest, X, 2 * float(top[0]) + slack)
+    if (uniform or P * (P - 1) // 2 <= ONE_QUERY) and found * P / min(size, P) <= 1.4 * ROWS:
         i, j = rest.query_pairs(2 * float(top[0]) + slack, output_type="ndarray").T
         yield from _kept(order, R, ij, i, j, norm(X[i] - X[j]), slack)
         return
@@ -186,6 +222,8 @@ def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
         if 2 * (c0 - base) > P - base:          # a smaller tree on the panels still to come
             base, rest = c0, cKDTree(X[c0:])
         c1 = min(P, c0 + size)
+        if not uniform:                         # R decreasing: the panels within CLASS
+            c1 = min(c1, max(c0 + 1, int(np.searchsorted(-R, -R[c0] / CLASS, "right"))))
         head = cKDTree(X[c0:c1])
         hits = head.sparse_distance_matrix(rest, float(R[c0:c1].max() + top[c0]) + slack,
                                            output_type="ndarray")
@@ -194,6 +232,20 @@ def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
         del hits
         yield from _kept(order, R, ij, i, j, dist, slack)
         c0 = c1
+
+
+def _first_block(tree: cKDTree, X: np.ndarray, radius: float) -> tuple[int, int]:
+    """(found, size): the first ``size`` of the points X (P, 3) (64, or fewer, halved until
+    at most ROWS) have ``found`` ordered pairs (self included) within ``radius`` among the
+    points of ``tree`` (on X). Without a count when all pairs fit in ROWS: (P^2, P)."""
+    P, size = len(X), 64
+    if P * (P - 1) // 2 <= ROWS:
+        return P * P, P
+    while True:
+        found = cKDTree(X[:size]).count_neighbors(tree, radius)
+        if size == 1 or found <= ROWS:
+            return found, size
+        size //= 2
 
 
 def _kept(order: np.ndarray, R: np.ndarray, ij: np.ndarray, i: np.ndarray, j: np.ndarray,

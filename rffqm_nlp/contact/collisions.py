@@ -11,11 +11,12 @@ The method, module by module:
 * :mod:`~rffqm_nlp.contact.panels`: panels are rigid and planar, so panel (i, j) is
   exactly two triangles; the folded states come from
   :func:`rffqm_nlp.model.numpy_model.fold` (batched) and are held as tables of named
-  fields (corners, centroid, unit normal, radius).
+  fields (corners, centroid, unit normal, radius), beside their frames.
 * :mod:`~rffqm_nlp.contact.narrow`: exact distances between panels (separating axes and
   segment and vertex-face distances of their triangles), cheap lower bounds on them, and
   the overlaps of the flat pattern.
-* :mod:`~rffqm_nlp.contact.broad`: for each coarse step of the motion, k-d tree queries
+* :mod:`~rffqm_nlp.contact.broad`: for each step of the motion (coarse steps, halved
+  where the sheet moves far from one affine map over one), k-d tree queries
   with a reach per panel from an affine fit of the step's displacements (one per grid
   tile where a large sheet bends) give every pair the step's sphere gaps and cheapest
   motion bound do not certify clear, in chunks of bounded size.

@@ -3,18 +3,19 @@
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair (:func:`~rffqm_nlp.contact.broad.coarse_rows`) is
   certified clear when (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance
-  and m bounds how far the pair's distance can change over the step
-  (:func:`motion_bound`): SAFETY times the largest relative displacement of a vertex of
-  one panel against a vertex of the other between w0 and w1 (a rigid motion's
-  displacement is affine on a panel, so its extreme is at a vertex; the 16 vertex pairs
-  are compared, after a coarser bound, the centres' relative displacement plus each
-  panel's largest vertex displacement about its centre, has failed to certify the step),
-  or SAFETY times the largest displacement of a vertex of one panel in the frame of the
-  other (origin at its corner a, axes along its edge a -> b and its normal), whichever is
-  smaller: in its own frame a panel is still and the other moves rigidly, so the
-  distance changes by at most that. The frame bound is the one that certifies panels
-  hinged across a very thin panel (side-length LP patterns): they stay close while their
-  far corners move a lot, but in one another's frame they hardly move. Distances are
+  and m bounds how far the pair's distance can change over the step: SAFETY times the largest relative displacement of a vertex of
+  one panel against a vertex of the other between w0 and w1 (:func:`pair_bound`; a
+  rigid motion's displacement is affine on a panel, so its extreme is at a vertex; the
+  16 vertex pairs are compared), or SAFETY times the largest displacement of a vertex of
+  one panel in the frame of the other (:func:`frame_bound`; origin at its corner a, axes
+  along its edge a -> b and its normal), whichever is smaller: in its own frame a panel
+  is still and the other moves rigidly, so the distance changes by at most that. Both
+  are computed only after a coarser bound, the centres' relative displacement plus each
+  panel's largest vertex displacement about its centre, has failed to certify the step,
+  the frame bound first (it certifies nearly all the pairs that get this far: panels
+  turning together, and panels hinged across a very thin panel, as in side-length LP
+  patterns, which stay close while their far corners move a lot but hardly move in one
+  another's frame), the vertex pairs only where it has not. Distances are
   first bounded from below cheaply (:func:`~rffqm_nlp.contact.narrow.lower_bound`); the
   exact distance is computed only where that bound does not certify the step, and only
   an exact distance reports a contact.
@@ -22,6 +23,12 @@
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
   The earliest sample in contact lies within ``tol`` after the true first contact.
+* Fast steps: a coarse step over which the sheet moves far from one affine map (its
+  median reach above ``SPLIT_REACH`` panel radii; a designed pattern bends fast near
+  flat) is halved before its broad phase, its halves likewise (:func:`steps`), while
+  longer than ``tol``. The halves are those the refinement would follow, at the same
+  midpoints, so the samples, and with every certificate sound the report, stay the
+  same; the pairs within reach shrink like the square of a step's motion.
 * Memory and order: the coarse steps are taken in order, a step's rows refined as the
   broad phase gives them (in batches of at most ``ROWS`` rows), and no step that starts
   after the earliest contact found is looked at. The result does not depend on the order
@@ -43,10 +50,16 @@ from . import broad
 from .broad import SAFETY
 from .narrow import distance, lower_bound
 from .panels import Geometry, PanelPair, States
-from .vectors import cross, dot, most, norm
+from .vectors import dot, most, norm
 
 #: Largest coarse step in omega.
 MAX_STEP = 0.1
+
+#: A step whose median reach (:func:`~rffqm_nlp.contact.broad.reach`) exceeds this many
+#: median panel radii is halved before its broad phase: its motion is far from one affine
+#: map (a sheet bending fast, as a designed pattern does near flat), and the pairs within
+#: its reaches grow like their square, two halves' like half of it.
+SPLIT_REACH = 2.0
 
 #: Panel pairs per batch of the bounds and distances along the motion.
 BATCH = 2048
@@ -56,18 +69,18 @@ def first_contact(geo: Geometry, w_max: float, clearance: float,
                   tol: float) -> tuple[float | None, list[PanelPair]]:
     """The earliest |omega| in [0, |w_max|] with two panels within ``clearance``, signed
     like ``w_max`` (None when there is none), and the panel pairs in contact there. The
-    coarse steps in order, their rows refined as the broad phase gives them, once at least
-    ROWS are held (or at the end); no step that starts after the earliest contact found
-    is looked at."""
+    steps in order (:func:`steps`), their rows refined as the broad phase gives them, once
+    at least ROWS are held (or at the end); no step that starts after the earliest contact
+    found is looked at."""
     sign = -1.0 if w_max < 0 else 1.0
     W = abs(w_max)
     n_steps = max(1, int(np.ceil(W / MAX_STEP)))
     st = States(geo, sign, np.linspace(0.0, W, n_steps + 1))
     found, held = _Contact(geo), []
-    for a in range(n_steps):
-        if st.omegas[a] > found.best:
+    for s in (s for a in range(n_steps) for s in steps(geo, st, a, a + 1, clearance, tol)):
+        if st.omegas[s.a] > found.best:
             break
-        for chunk in broad.coarse_rows(geo, st, a, clearance):
+        for chunk in broad.coarse_rows(geo, st, s):
             held.append(chunk)
             if sum(len(rows) for rows, _ in held) >= broad.ROWS:
                 _refine(st, *_joined(held), clearance, tol, found)
@@ -77,6 +90,22 @@ def first_contact(geo: Geometry, w_max: float, clearance: float,
     if not np.isfinite(found.best):
         return None, []
     return sign * float(found.best) if found.best > 0 else 0.0, found.pairs
+
+
+def steps(geo: Geometry, st: States, a: int, b: int, clearance: float, tol: float):
+    """The step from state ``a`` to state ``b`` of ``st`` as :class:`~.broad.Step` s in
+    order: halved (its midpoint state added to ``st``) while its reaches are far
+    (SPLIT_REACH) and it is longer than ``tol``, the halves likewise. The halves are the
+    ones :func:`_refine` would follow, so the samples that can report a contact stay the
+    same."""
+    s = broad.step(geo, st, a, b, clearance)
+    w = st.omegas
+    if not (s.far(SPLIT_REACH) and w[b] - w[a] > tol):
+        yield s
+        return
+    mid = int(st.index(np.array([(w[a] + w[b]) / 2]))[0])
+    yield from steps(geo, st, a, mid, clearance, tol)
+    yield from steps(geo, st, mid, b, clearance, tol)
 
 
 def _joined(chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -127,8 +156,10 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
                       np.tile(q, 2))
         da, db = d[:n], d[n:]
         loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
-        m[loose] = SAFETY * _in_batches(motion_bound, st, ia[loose], ib[loose], p[loose],
-                                        q[loose])
+        for bound in (frame_bound, pair_bound):      # m is SAFETY times the smaller at last
+            new = SAFETY * _in_batches(bound, st, ia[loose], ib[loose], p[loose], q[loose])
+            m[loose] = new if bound is frame_bound else np.minimum(m[loose], new)
+            loose &= (da + db - m) / 2 <= clearance
         exact = (da + db - m) / 2 <= clearance
         k = int(exact.sum())
         d = per_state(distance, st, np.concatenate([ia[exact], ib[exact]]),
@@ -142,31 +173,33 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
             stack.append((halves, np.full(len(halves), np.inf)))
 
 
-def motion_bound(st: States, ia: np.ndarray, ib: np.ndarray, p: np.ndarray,
-                 q: np.ndarray) -> np.ndarray:
-    """Bounds (n,) on how far the distance of panels p and q can change from state ia to
-    state ib (all (n,)): the smallest of the largest displacement of a vertex of q
-    relative to a vertex of p (16 vertex pairs) and the largest displacement of a vertex
-    of one panel in the frame of the other (4 vertices, both ways)."""
+def pair_bound(st: States, ia: np.ndarray, ib: np.ndarray, p: np.ndarray,
+               q: np.ndarray) -> np.ndarray:
+    """The largest displacement (n,) of a vertex of q relative to a vertex of p (16 vertex
+    pairs) from state ia to state ib (all (n,))."""
     Pa, Pb, Qa, Qb = (st.quads(s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
     dP, dQ = Pb - Pa, Qb - Qa                                        # (n, 4, 3)
-    m = most(norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+    return most(norm(dQ[:, None] - dP[:, :, None]).reshape(-1, 16))
+
+
+def frame_bound(st: States, ia: np.ndarray, ib: np.ndarray, p: np.ndarray,
+                q: np.ndarray) -> np.ndarray:
+    """The largest displacement (n,) of a vertex of one panel in the frame of the other
+    (:func:`~rffqm_nlp.contact.panels.frames`; 4 vertices, both ways, the smaller) from
+    state ia to state ib (all (n,))."""
+    Pa, Pb, Qa, Qb = (st.quads(s, x) for s, x in ((ia, p), (ib, p), (ia, q), (ib, q)))
+    m = np.full(len(p), np.inf)
     for A, B, C, D, x in ((Pa, Pb, Qa, Qb, p), (Qa, Qb, Pa, Pb, q)):   # C, D in A's frame
-        La, Lb = _local(A, st.normals(ia, x), C), _local(B, st.normals(ib, x), D)
+        La, Lb = _local(A, st.frames(ia, x), C), _local(B, st.frames(ib, x), D)
         m = np.minimum(m, most(norm(Lb - La)))
     return m
 
 
-def _local(A: np.ndarray, n: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Coordinates (n, 4, 3) of the points B (n, 4, 3) in the frame of the panel with
-    corners A (n, 4, 3) and unit normal n (n, 3): origin at corner a, axes along a -> b,
-    the normal's cross product with it, and the normal."""
-    e1 = A[:, 1] - A[:, 0]
-    e1 = e1 - dot(e1, n)[:, None] * n
-    e1 = e1 / norm(e1)[:, None]
-    e2 = cross(n, e1)
+def _local(A: np.ndarray, frame: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 4, 3) of the points B (n, 4, 3) in the frames (n, 3, 3) (rows the
+    axes) of the panels with corners A (n, 4, 3), origin at their corner a."""
     r = B - A[:, :1]
-    return np.stack([dot(r, e1[:, None]), dot(r, e2[:, None]), dot(r, n[:, None])], axis=-1)
+    return np.stack([dot(r, frame[:, None, k]) for k in range(3)], axis=-1)
 
 
 def per_state(f, st: States, s: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -104,13 +104,15 @@ class States:
     ``omegas``: their |omega| (a list, K entries). Each state's panel table holds one row
     per quantity and one column per panel (gathers by row are several times faster than
     by panel), read by field (:class:`Panels`): :meth:`panels` for one state,
-    :meth:`columns` and :meth:`field` for panels of several states. Its storage doubles
-    as states are added (halving steps adds a few states at a time).
+    :meth:`columns` and :meth:`field` for panels of several states; beside it a table of
+    the panels' frames (:meth:`frames`). The storage doubles as states are added (halving
+    steps adds a few states at a time).
     """
 
     def __init__(self, geo: Geometry, sign: float, omegas: np.ndarray):
         self.geo, self.sign, self.omegas, self._at = geo, sign, [], {}
         self._T = np.zeros((0, WIDTH, geo.N * geo.M))
+        self._F = np.zeros((0, 9, geo.N * geo.M))
         self.add(omegas)
 
     def panels(self, k: int) -> Panels:
@@ -132,9 +134,7 @@ class States:
         omegas = np.asarray(omegas, dtype=float)
         K, k = len(self.omegas), len(omegas)
         if K + k > len(self._T):
-            grown = np.empty((max(2 * len(self._T), K + k), *self._T.shape[1:]))
-            grown[:K] = self._T[:K]
-            self._T = grown
+            self._T, self._F = (_grown(T, K, K + k) for T in (self._T, self._F))
         Y = np.ascontiguousarray(self.geo.states(self.sign * omegas).transpose(0, 2, 1))
         T = Panels.of(self._T[K:K + k])                                  # Y: (k, 3, V)
         T.corners[...] = Y.take(self.geo.corners.T, axis=2)              # (k, 3, 4, P)
@@ -145,13 +145,15 @@ class States:
                       u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
         T.normal[...] = n / np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)[:, None]
         T.radius[...] = self.geo.radius
+        self._F[K:K + k] = frames(X, T.normal).reshape(k, 9, -1)
         self._at.update((w, K + i) for i, w in enumerate(omegas.tolist()))
         self.omegas.extend(omegas.tolist())
 
-    def _gather(self, s: np.ndarray, p: np.ndarray, rows: slice) -> np.ndarray:
-        """The table rows ``rows`` (r, n) of panels p in states s (both (n,)): one np.take
-        on the flattened tables."""
-        T = self._T[:len(self.omegas)]
+    def _gather(self, s: np.ndarray, p: np.ndarray, rows: slice,
+                table: np.ndarray | None = None) -> np.ndarray:
+        """The rows ``rows`` (r, n) of the panel table (or ``table``, of the same layout)
+        of panels p in states s (both (n,)): one np.take on the flattened tables."""
+        T = (self._T if table is None else table)[:len(self.omegas)]
         R, P = T.shape[1:]
         at = np.arange(R)[rows] * P
         return T.reshape(-1).take((s * (R * P) + p)[None] + at[:, None], mode="clip")
@@ -171,3 +173,33 @@ class States:
     def normals(self, s: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Unit normals (n, 3) of panels p in states s (both (n,))."""
         return np.ascontiguousarray(self.field(s, p, "normal").T)
+
+    def frames(self, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The frames (n, 3, 3) of panels p in states s (both (n,)), as :func:`frames`
+        gives them."""
+        F = self._gather(s, p, slice(0, 9), self._F)
+        return np.ascontiguousarray(F.reshape(3, 3, -1).transpose(2, 0, 1))
+
+
+def frames(X: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """The panels' frames (k, 3, 3, P) from their corners X (k, 3, 4, P) and unit normals
+    n (k, 3, P): indexed [state, axis, coordinate, panel], the axes along a -> b (made
+    normal to n), the normal's cross product with it, and n; origin at corner a. The frame
+    in which :func:`~rffqm_nlp.contact.motion.frame_bound` measures the other panel's
+    motion."""
+    e1 = X[:, :, 1] - X[:, :, 0]
+    e1 = e1 - (e1[:, 0] * n[:, 0] + e1[:, 1] * n[:, 1] + e1[:, 2] * n[:, 2])[:, None] * n
+    e1 = e1 / np.sqrt(e1[:, 0] * e1[:, 0] + e1[:, 1] * e1[:, 1] + e1[:, 2] * e1[:, 2])[:, None]
+    e2 = np.stack([n[:, 1] * e1[:, 2] - n[:, 2] * e1[:, 1], n[:, 2] * e1[:, 0] - n[:, 0] * e1[:, 2],
+                   n[:, 0] * e1[:, 1] - n[:, 1] * e1[:, 0]], axis=1)
+    return np.stack([e1, e2, n], axis=1)
+
+
+def _grown(T: np.ndarray, kept: int, size: int) -> np.ndarray:
+    """A table (K, ...) with room for ``size`` states: T if it has, else a copy of its
+    first ``kept`` with twice the room (or ``size``)."""
+    if size <= len(T):
+        return T
+    grown = np.empty((max(2 * len(T), size), *T.shape[1:]))
+    grown[:kept] = T[:kept]
+    return grown
