@@ -102,9 +102,9 @@ class Surface:
 
     # -- the AD graph -------------------------------------------------------------------
     @cached_property
-    def _functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
-        """(r, geometry, second derivatives) CasADi Functions of (u, v), built once from one
-        SX graph."""
+    def _functions(self) -> tuple[ca.Function, ca.Function, ca.Function, ca.Function]:
+        """(r, geometry, second derivatives, first derivatives) CasADi Functions of (u, v),
+        built once from one SX graph."""
         u, v = ca.SX.sym("u"), ca.SX.sym("v")
         r = ca.vertcat(*self._r(u, v))
         r_u, r_v = ca.jacobian(r, u), ca.jacobian(r, v)
@@ -122,7 +122,8 @@ class Surface:
             ["u", "v"], ["r", "r_u", "r_v", "n", "forms", "K", "H"])
         second = ca.Function("second", [u, v], [ca.vertcat(r, r_u, r_v, r_uu, r_uv, r_vv)],
                              ["u", "v"], ["derivatives"])
-        return point, geometry, second
+        first = ca.Function("first", [u, v], [r_u, r_v], ["u", "v"], ["r_u", "r_v"])
+        return point, geometry, second, first
 
     def casadi_function(self) -> ca.Function:
         """The CasADi Function (u, v) -> r (3x1), for use inside other CasADi graphs."""
@@ -170,8 +171,8 @@ class Surface:
 
     def derivatives(self, u: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
         """(r_u, r_v), each broadcast(u, v).shape + (3,)."""
-        shape, out = self._geometry(u, v)
-        return out[1].T.reshape(shape + (3,)), out[2].T.reshape(shape + (3,))
+        shape, (r_u, r_v) = self._evaluate(self._functions[3], u, v)
+        return r_u.T.reshape(shape + (3,)), r_v.T.reshape(shape + (3,))
 
     def normal(self, u: Any, v: Any) -> np.ndarray:
         """Unit normal r_u x r_v / |r_u x r_v|, shape broadcast(u, v).shape + (3,)."""
