@@ -24,6 +24,7 @@ PUBLIC = [
     # targets
     "surfaces.get", "surfaces.names", "surfaces.Custom", "surfaces.Surface", "surfaces.Mesh",
     "surfaces.from_config", "surfaces.grid_faces", "meshes.is_mesh_file", "meshes.FORMATS",
+    "surfaces.Curvature",
     # the forward models and side lengths
     "numpy_model.march", "numpy_model.fold", "marching.march", "marching.fold",
     "lengths.side_length_lp", "lengths.side_length_nlp",
