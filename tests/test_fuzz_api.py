@@ -56,10 +56,13 @@ clearance = importlib.import_module("rffqm_nlp.design.clearance")
 make = importlib.import_module("rffqm_nlp.make")
 thick = importlib.import_module("rffqm_nlp.contact.thick")
 closed_form = importlib.import_module("rffqm_nlp.design.solvers.closed_form")
+curvature_target = importlib.import_module("rffqm_nlp.targets.curvature_target")
+curvature_fit = importlib.import_module("rffqm_nlp.design.curvature_fit")
 
 #: The modules whose public callables are fuzzed.
 MODULES = (boundary, pattern, numpy_model, marching, vertex, lengths, shape, surfaces,
-           curvature, collisions, clearance, backend, mechanics, make, thick, closed_form)
+           curvature, collisions, clearance, backend, mechanics, make, thick, closed_form,
+           curvature_target, curvature_fit)
 #: Longest time one call may take (seconds) before it counts as a hang.
 CALL_LIMIT = 20.0
 #: Result records: dataclasses that store what they are given and compute nothing (their
@@ -68,7 +71,7 @@ RECORDS = {"collisions.CollisionReport", "curvature.Curvature", "lengths.SideLen
            "clearance.Closest", "mechanics.Modes", "mechanics.Response", "make.Made",
            "make.MakeOptions", "make.Sheet", "make.Stop", "make.Tie", "thick.ThickPanels",
            "thick.ThickReport", "closed_form.ClosedForm", "closed_form.Separable",
-           "closed_form.CurvatureField"}
+           "closed_form.CurvatureField", "curvature_target.Realisable"}
 
 
 # --------------------------------------------------------------------------- valid inputs
@@ -90,6 +93,11 @@ CONES = thick.ThickPanels.build(PAT, 1.0, 0.05, "back").cones()
 SHEET = mechanics.Material(E=1e9, nu=0.3, thickness=1e-3, fold_stiffness=0.1, density=900.0)
 BAR_AND_HINGE = mechanics.BarAndHinge(PAT, 1.0, SHEET, width=0.1)
 HELD = [[1, 1], [1, 3], [3, 1]]
+#: Curvature targets: K and H, and principal curvatures given by a function.
+FIELD = surfaces.Curvature(K=1.0, H=1.5, size=(1.0, 2.0))
+SADDLE = surfaces.Curvature(kx=lambda x, y: 0.1 + 0 * x, ky=-0.1, size=(3.0, 2.0))
+FOLDED_FIELD = numpy_model.fold(numpy_model.march(rq.miura_boundary(4, 4, 0.3, 0.4)), 2.0)
+FIELD_MAPS = curvature_fit.prescribed_maps(shape.coarse_grain(FOLDED_FIELD), FIELD)
 
 
 def plane_fn(u, v):
@@ -254,6 +262,33 @@ CALLS: dict[str, tuple[Callable, dict[str, Any]]] = {
     "surfaces.Surface.mesh": (CAP.mesh, dict(n_u=3, n_v=4)),
     "surfaces.Surface.lattice_uv": (CAP.lattice_uv, dict(N=2, M=3, spacing=None)),
     "surfaces.Surface.lattice": (CAP.lattice, dict(N=2, M=2, spacing=(0.5, 0.5))),
+    "surfaces.Curvature": (surfaces.Curvature, dict(K=1.0, H=1.5, size=(1.0, 2.0),
+                                                    name="dome", reference=None)),
+    "surfaces.Curvature.values": (SADDLE.values, dict(x=np.array([0.1, 0.2]), y=0.3)),
+    "surfaces.Curvature.gaussian": (FIELD.gaussian, dict(x=0.1, y=np.array([0.2, 0.3]))),
+    "surfaces.Curvature.mean": (SADDLE.mean, dict(x=0.1, y=0.2)),
+    "surfaces.Curvature.principal": (FIELD.principal, dict(x=0.1, y=0.2)),
+    "surfaces.Curvature.lattice_xy": (FIELD.lattice_xy, dict(N=2, M=3)),
+    "surfaces.Curvature.lattice": (FIELD.lattice, dict(N=2, M=3)),
+    "surfaces.Curvature.sample": (FIELD.sample, dict(n_u=3, n_v=4)),
+    "surfaces.Curvature.mesh": (FIELD.mesh, dict(n_u=3, n_v=4)),
+    "surfaces.Curvature.scale": (SADDLE.scale, dict(N=3, M=2)),
+    "curvature_target.Curvature": (curvature_target.Curvature, dict(
+        kx=0.1, ky=-0.1, size=(1.0, 1.0))),
+    "curvature_target.from_config": (curvature_target.from_config, dict(
+        table={"K": 1.0, "size": [1.0, 2.0]}, root=None, trust=False)),
+    "curvature_target.is_curvature_table": (curvature_target.is_curvature_table, dict(
+        table={"kx": 0.1, "ky": 0.2, "size": [1, 1]})),
+    "curvature_fit.prescribed_maps": (curvature_fit.prescribed_maps, dict(
+        coarse=shape.coarse_grain(FOLDED_FIELD), target=FIELD)),
+    "curvature_fit.cell_errors": (curvature_fit.cell_errors, dict(maps=FIELD_MAPS,
+                                                                  diameter=2.0)),
+    "curvature_fit.curvature_errors": (curvature_fit.curvature_errors, dict(
+        maps=FIELD_MAPS, diameter=2.0)),
+    "curvature_fit.curvature_target_fit": (curvature_fit.curvature_target_fit, dict(
+        folded=FOLDED_FIELD, target=SADDLE)),
+    "curvature_fit.measured": (curvature_fit.measured, dict(
+        folded=FOLDED_FIELD, target_points=shape.coarse_grain(FOLDED_FIELD), target=FIELD)),
     "surfaces.Surface.closest_points": (CAP.closest_points, dict(points=LATTICE + 0.1,
                                                                  resolution=11)),
     # curvature

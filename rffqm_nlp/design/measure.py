@@ -15,8 +15,8 @@ from ..model import numpy_model
 from ..model.boundary import BoundaryData
 from ..model.pattern import Pattern
 from ..targets import shape, surfaces
-from ..targets.curvature import curvature_maps
-from . import transcription
+from ..targets.curvature_target import Curvature
+from . import curvature_fit, transcription
 from .options import SolveOptions
 from .results import DesignResult, Fit, SolveStats
 
@@ -35,7 +35,9 @@ CONSTRAINT_SLACK = 1e-6
 def result(problem: DesignProblem, nlp: transcription.NLP, start: Start, x: np.ndarray,
            stats: SolveStats, options: SolveOptions) -> DesignResult:
     """The result of ``problem`` at the NLP's point ``x`` (n,): re-march it with the NumPy
-    model, check it, measure the fit. Raises :class:`SolverFailed` (with ``stats`` and
+    model, check it, measure the fit (for a curvature target:
+    :func:`.curvature_fit.curvature_target_fit`) and the curvature
+    (:func:`.curvature_fit.measured`). Raises :class:`SolverFailed` (with ``stats`` and
     ``x``) when it does not re-march ("remarch_failed"), when the re-march disagrees with
     the graph ("remarch_mismatch"), breaks a constraint ("constraint_violation") or holds
     NaN or inf ("non_finite")."""
@@ -57,7 +59,13 @@ def result(problem: DesignProblem, nlp: transcription.NLP, start: Start, x: np.n
     target_points = nlp.target_array(x, start.target_points)
     R, t, _ = shape.kabsch(shape.coarse_grain(Y), target_points)
     folded = Y @ R.T + t
-    fit = Fit(**design_fit(folded, target_points, problem.target),
+    if isinstance(problem.target, Curvature):  # no positions: the lattice is its own target
+        target_points = shape.coarse_grain(folded)
+        fields = curvature_fit.curvature_target_fit(folded, problem.target)
+    else:
+        fields = design_fit(folded, target_points, problem.target)
+    curvature = curvature_fit.measured(folded, target_points, problem.target)
+    fit = Fit(**fields, **curvature["errors"],
               min_side_over_mean=float(pattern.side_lengths.min()
                                        / pattern.side_lengths.mean()),
               min_sector_angle=float(pattern.sector_angles.min()))
@@ -71,9 +79,8 @@ def result(problem: DesignProblem, nlp: transcription.NLP, start: Start, x: np.n
     return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
                         target_points=target_points, rotation=R, translation=t,
                         fit=fit, stats=stats, problem=config, x=x,
-                        curvature=curvature_maps(shape.coarse_grain(folded),
-                                                 target_points, problem.target),
-                        target_grid=grid)
+                        curvature=curvature["maps"], target_grid=grid,
+                        notes=curvature["notes"])
 
 
 def check_constraints(problem: DesignProblem, pattern: Pattern, stats: SolveStats,

@@ -16,7 +16,9 @@ from ..ipopt_options import INT_MAX, check_ipopt_options
 
 TRANSCRIPTIONS = ("sequential", "simultaneous")
 LM = "levenberg-marquardt"
-SOLVERS = ("ipopt", LM)
+#: The closed form as a method of its own: the starting design is the result.
+CLOSED_FORM = "closed-form"
+SOLVERS = ("ipopt", LM, CLOSED_FORM)
 HESSIANS = ("gauss-newton", "exact", "limited-memory")
 #: The designs a solve can start from (SolveOptions.start).
 STARTS = ("miura", "closed-form")
@@ -67,7 +69,10 @@ class SolveOptions:
       small QP). It stops at ``stop_rms``, or where the reduced problem's optimality
       conditions hold to ``tol`` (status "Solve_Succeeded"); only when it stalls, or its
       restoration fails, does IPOPT (with ``hessian``) finish. Measured against IPOPT in
-      docs/benchmarks/default_solve.md;
+      docs/benchmarks/default_solve.md; "closed-form" returns the closed form itself
+      (:func:`rffqm_nlp.design.solvers.closed_form.closed_form_start`, or for a curvature
+      target :func:`rffqm_nlp.design.solvers.closed_form.prescribed_start`), measured, with
+      no optimiser (docs/curvature_targets.md);
     * ``transcription``: "simultaneous" (all pattern and kinematic quantities as variables,
       the marching equations as sparse equality constraints) or "sequential" (the marching
       graph as a function of the boundary data; IPOPT only). Both state the same NLP;
@@ -119,7 +124,8 @@ class SolveOptions:
       alternating perturbation of that Miura for the target's curvatures along the pattern's
       two directions (:func:`rffqm_nlp.design.solvers.closed_form.closed_form_start`; where
       the target's curvatures ask too much of it, the Miura). A ``warm_start`` replaces
-      either as the initial guess. Measured in docs/benchmarks/closed_form.md.
+      either as the initial guess. Measured in docs/benchmarks/closed_form.md. A curvature
+      target always starts from its closed form (the Miura where that fails).
     """
 
     solver: str = LM

@@ -23,6 +23,7 @@ from ..files import Key, check_table, describe_value
 from ..model import numpy_model
 from ..model.boundary import LAYOUTS, BoundaryData, miura_boundary, refine
 from ..targets import shape, surfaces
+from ..targets.curvature_target import Curvature
 from . import transcription
 from .options import SolveOptions, transcription_of, with_overrides
 from .results import DesignResult
@@ -30,6 +31,8 @@ from .solve import solve
 
 PI = np.pi
 DEFAULT_WEIGHTS = {"position": 1.0, "forms": 0.1, "regularization": 0.1, "smoothness": 0.0}
+#: The weights of a problem whose target is a :class:`Curvature` (docs/curvature_targets.md).
+CURVATURE_WEIGHTS = {"curvature": 1.0, "size": 1.0, "regularization": 0.01, "smoothness": 0.0}
 GROUPS = ("angles", "lengths", "omega")
 #: What the target lattice is (DesignProblem.correspondence, docs/meshes.md).
 CORRESPONDENCES = ("lattice", "free")
@@ -48,7 +51,8 @@ DESIGN_KEYS = {
     "omega_bounds": Key("list", length=2, item=Key("number", low=-PI, high=PI),
                         hint="([low, high])"),
     "fix": Key("list", item=Key("choice", choices=GROUPS)),
-    "weights": Key("table", spec={name: Key("number", low=0.0) for name in DEFAULT_WEIGHTS}),
+    "weights": Key("table", spec={name: Key("number", low=0.0)
+                                  for name in {**DEFAULT_WEIGHTS, **CURVATURE_WEIGHTS}}),
     "correspondence": Key("choice", choices=CORRESPONDENCES),
 }
 
@@ -67,6 +71,11 @@ class Start:
 @dataclass(frozen=True)
 class DesignProblem:
     """Which RFFQM pattern, perturbed from a Miura-ori, folds into ``target``?
+
+    ``target``: a surface (:mod:`rffqm_nlp.targets.surfaces`: a built-in, a Custom, a Mesh)
+    whose lattice the coarse lattice should match, or a curvature field
+    (:class:`~rffqm_nlp.targets.curvature_target.Curvature`) whose curvatures it should
+    have over a footprint of its size (docs/curvature_targets.md).
 
     Parameters (all with defaults chosen so designs are manufacturable):
 
@@ -94,17 +103,21 @@ class DesignProblem:
       :func:`rffqm_nlp.design.transcription.loss_residuals`; "regularization" (Tikhonov, towards
       the Miura start) and "smoothness" (second differences of the boundary perturbation
       along each edge, :func:`rffqm_nlp.design.transcription.smoothness_residuals`; default 0);
-      missing keys count as 0;
+      missing keys count as 0. A curvature target has "curvature" (its cells' curvatures
+      against the prescription) and "size" (its lines' lengths against the footprint's)
+      in place of "position" and "forms" (:data:`CURVATURE_WEIGHTS`,
+      :mod:`rffqm_nlp.design.transcription.curvature_loss`);
     * ``correspondence``: "free" (the default: the lattice's (u, v) are a smooth map of
       the lattice indices whose few controls are design variables, kept in the domain and
       from folding over, :class:`rffqm_nlp.design.transcription.Correspondence`) or "lattice"
       (the target lattice is r on the uniform grid of the domain); "free" fits the shape
-      closer for a few more iterations, measured in docs/meshes.md.
+      closer for a few more iterations, measured in docs/meshes.md. A curvature target has
+      no positions and no correspondence.
 
     How it is solved is a :class:`SolveOptions`, given to :meth:`solve`.
     """
 
-    target: surfaces.Surface
+    target: surfaces.Surface | Curvature
     panels: tuple[int, int] = (20, 20)
     layout: str = "zigzag_i"
     alpha0: float = 1.1
@@ -119,12 +132,13 @@ class DesignProblem:
     correspondence: str = "free"
 
     def __post_init__(self) -> None:
-        if not isinstance(self.target, surfaces.Surface):
-            raise InputError("target must be a surface from rq.surfaces (get, Custom, load), "
-                             f"got {describe_value(self.target)}")
+        if not isinstance(self.target, (surfaces.Surface, Curvature)):
+            raise InputError("target must be a surface from rq.surfaces (get, Custom, Mesh, "
+                             "load) or a curvature field (rq.surfaces.Curvature), got "
+                             f"{describe_value(self.target)}")
         values = check_table({f.name: getattr(self, f.name) for f in fields(self)
                               if f.name != "target"}, DESIGN_KEYS, "[design]")
-        values["weights"] = {**dict.fromkeys(DEFAULT_WEIGHTS, 0.0), **values["weights"]}
+        values["weights"] = self._weights_of(values["weights"])
         for name, value in values.items():
             object.__setattr__(self, name, value)
         if not any(self.weights.values()):
@@ -135,6 +149,23 @@ class DesignProblem:
             raise InputError(f"[design] omega_bounds and omega0 need omega_bounds[0] <= omega0 "
                              f"<= omega_bounds[1] with omega_bounds[0] < omega_bounds[1], got "
                              f"omega0 = {self.omega0:g}, omega_bounds = [{lo:g}, {hi:g}]")
+
+    def _weights_of(self, given: dict[str, float]) -> dict[str, float]:
+        """The weights of this problem's target kind, missing ones 0: a surface's
+        (:data:`DEFAULT_WEIGHTS`' names) or a curvature target's (:data:`CURVATURE_WEIGHTS`'),
+        the other kind's defaults replaced by this kind's; a positive weight of the other
+        kind is refused."""
+        curvature = isinstance(self.target, Curvature)
+        names, other = ((CURVATURE_WEIGHTS, DEFAULT_WEIGHTS) if curvature
+                        else (DEFAULT_WEIGHTS, CURVATURE_WEIGHTS))
+        if given == other:
+            given = names
+        foreign = sorted(k for k, v in given.items() if k not in names and v > 0)
+        if foreign:
+            raise InputError(f"[design] weights {', '.join(foreign)} do not apply to "
+                             f"{'a curvature' if curvature else 'a surface'} target; its "
+                             f"weights are {', '.join(names)}")
+        return {**dict.fromkeys(names, 0.0), **{k: v for k, v in given.items() if k in names}}
 
     @property
     def N(self) -> int:
@@ -191,7 +222,10 @@ class DesignProblem:
             weights=weights or self.weights, min_angle=self.min_angle,
             min_length=self.min_length, mu_margin=self.mu_margin,
             omega_bounds=self.omega_bounds, fixed=self.fix, reference=start.boundary,
-            reference_omega=start.omega, correspondence=corr, controls=controls)
+            reference_omega=start.omega, correspondence=corr, controls=controls,
+            curvature=(transcription.CurvatureLoss.of(self.target, self.N, self.M,
+                                                      weights or self.weights)
+                       if isinstance(self.target, Curvature) else None))
         return getattr(transcription, (options or SolveOptions()).transcription)(setup)
 
     def carried(self, initial: DesignResult, start: Start | None = None) -> Start:
@@ -248,8 +282,9 @@ class DesignProblem:
         return controls
 
     def _correspondence(self) -> transcription.Correspondence | None:
-        """The free correspondence from the uniform grid (None with "lattice")."""
-        if self.correspondence != "free":
+        """The free correspondence from the uniform grid (None with "lattice", and for a
+        curvature target, which prescribes no positions)."""
+        if self.correspondence != "free" or isinstance(self.target, Curvature):
             return None
         return transcription.Correspondence.uniform(
             self.target.casadi_function(), self.target.domain, (self.N + 1, self.M + 1))

@@ -13,7 +13,8 @@ import numpy as np
 import trimesh
 
 from ..errors import InputError, RffqmError
-from ..files import Key, check_table, describe_value, jsonable, read_json, write_json
+from ..files import (Key, check_table, check_value, describe_value, jsonable, read_json,
+                     write_json)
 from ..model import numpy_model
 from ..model.boundary import BoundaryData
 from ..model.pattern import Pattern, check_omega
@@ -43,8 +44,11 @@ FIT_KEYS: dict[str, Key] = {
     "collision_free": Key("bool", optional=True),
     "first_contact_omega": Key("number", low=-math.pi, high=math.pi, optional=True),
     **{name: Key("number", low=0.0, optional=True)
-       for name in ("rms_surface_vertices", "hausdorff_vertices", "coverage")},
+       for name in ("rms_surface_vertices", "hausdorff_vertices", "coverage",
+                    "curvature_rms", "curvature_max")},
 }
+#: A result's notes (DesignResult.notes).
+NOTES_KEY = Key("list", item=Key("string"), most=100)
 #: The lists of a solve's history, one entry per iteration.
 HISTORY_KEYS: dict[str, Key] = {
     "iter": Key("list", item=Key("whole", low=0), required=True),
@@ -113,8 +117,19 @@ class Fit:
       first contact, or None (not relative: radians). Both None in a result saved before
       the check.
 
-    The three shape fits added with meshes as targets are None in a result saved before
-    them (not measured).
+    * ``curvature_rms``, ``curvature_max``: the Gaussian curvature error of the coarse
+      lattice's cells against the target's K (a surface's, or a curvature target's
+      prescription) over the largest |K|, RMS and largest
+      (:func:`rffqm_nlp.design.curvature_fit.curvature_errors`; per cell:
+      :func:`~rffqm_nlp.design.curvature_fit.cell_errors` of ``result.curvature``).
+
+    For a curvature target (:class:`~rffqm_nlp.targets.curvature_target.Curvature`), which
+    prescribes no positions, ``rms``, ``rms_surface`` and ``hausdorff`` are 0 and
+    ``coverage`` is over the footprint's area
+    (:func:`rffqm_nlp.design.curvature_fit.curvature_target_fit`).
+
+    The three shape fits added with meshes as targets, and the two curvature errors, are
+    None in a result saved before them (not measured).
     """
 
     rms: float
@@ -128,6 +143,8 @@ class Fit:
     rms_surface_vertices: float | None = None
     hausdorff_vertices: float | None = None
     coverage: float | None = None
+    curvature_rms: float | None = None
+    curvature_max: float | None = None
 
     def to_dict(self) -> dict[str, float | None]:
         """{field: value}, JSON-ready (None for a shape fit not measured)."""
@@ -249,7 +266,10 @@ class DesignResult:
       the target, each (N/2 - 1, M/2 - 1) (None when not computed);
     * ``target_grid``: (n, m, 3) samples of the target surface, uniform in its parameters,
       kept when ``problem["target"]`` cannot rebuild it (a lambda or closure: see
-      :func:`rffqm_nlp.targets.surfaces.config_of`), else None.
+      :func:`rffqm_nlp.targets.surfaces.config_of`), else None;
+    * ``notes``: sentences on the design a reader should know, e.g. for a curvature target
+      whether a surface realises the prescription and where the error sits
+      (:func:`rffqm_nlp.design.curvature_fit.curvature_notes`); () in a result saved before.
 
     In a notebook a result shows its interactive view (:mod:`rffqm_nlp.show.view`).
     """
@@ -267,6 +287,7 @@ class DesignResult:
     x: np.ndarray = field(default_factory=lambda: np.zeros(0))
     curvature: Curvature | None = None
     target_grid: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def coarse(self) -> np.ndarray:
@@ -289,8 +310,8 @@ class DesignResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary of the whole result (``curvature`` and ``target_grid`` left
-        out when None)."""
-        optional = {}
+        out when None, ``notes`` when empty)."""
+        optional: dict[str, Any] = {"notes": list(self.notes)} if self.notes else {}
         if self.curvature is not None:
             optional["curvature"] = self.curvature.to_dict()
         if self.target_grid is not None:
@@ -426,4 +447,5 @@ def _checked(d: dict[str, Any], source: str) -> DesignResult:
         target_points=arrays["target_points"], rotation=rotation,
         translation=arrays["translation"], fit=fit, stats=stats, problem=dict(problem),
         x=arrays["x"], curvature=stored_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
-        target_grid=stored_target_grid(d, source))
+        target_grid=stored_target_grid(d, source),
+        notes=check_value(d.get("notes", ()), NOTES_KEY, f"{source}: notes"))

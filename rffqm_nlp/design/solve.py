@@ -14,17 +14,20 @@ import time
 from dataclasses import replace
 from typing import TYPE_CHECKING, Callable
 
+import casadi as ca
 import numpy as np
 
 from .. import memory
-from ..errors import InfeasibleDesign, SolverFailed, raise_for_ipopt
+from ..errors import InfeasibleDesign, InputError, SolverFailed, raise_for_ipopt
 from ..targets import shape
+from ..targets.curvature_target import Curvature
 from . import clearance, measure, transcription
 from .multistart import solve_multistart
-from .options import LM, SolveOptions
+from .options import CLOSED_FORM, LM, SolveOptions
 from .results import DesignResult, SolveStats
 from .solvers import ipopt, levenberg_marquardt
 from .solvers.closed_form import closed_form_start
+from .solvers.closed_form.prescribed import prescribed_start
 from .solvers.context import Outcome, Run
 
 if TYPE_CHECKING:  # for type hints only: the problem calls this module
@@ -36,6 +39,11 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
           warm_start: DesignResult | None = None, verbose: bool = False) -> DesignResult:
     """:meth:`DesignProblem.solve` (its docstring tells what each argument does)."""
     check_memory(problem, options)
+    if isinstance(problem.target, Curvature) and options.stop_rms is not None:
+        raise InputError("[solve] stop_rms is a distance to the target lattice, which a "
+                         "curvature target does not have; leave it out")
+    if options.solver == CLOSED_FORM:
+        return closed_form_result(problem, options)
     if options.multistart != 1:
         return solve_multistart(problem, options, callback=callback, warm_start=warm_start,
                                 verbose=verbose)
@@ -67,13 +75,42 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
 def starting_design(problem: DesignProblem, options: SolveOptions) -> Start:
     """The design a solve starts from and regularizes toward (``options.start``): the
     problem's Miura-ori, or the closed form for its target's curvatures, the Miura where
-    those curvatures ask more than the closed form can give (:class:`InfeasibleDesign`)."""
-    if options.start == "closed-form":
+    those curvatures ask more than the closed form can give (:class:`InfeasibleDesign`).
+    A curvature target starts from its closed form (:func:`prescribed_start`) whatever
+    ``options.start``."""
+    if options.start == "closed-form" or isinstance(problem.target, Curvature):
         try:
-            return closed_form_start(problem)
+            return closed_form_of(problem)
         except InfeasibleDesign:
             pass
     return problem.start()
+
+
+def closed_form_of(problem: DesignProblem, admissible: bool = False) -> Start:
+    """The closed form of ``problem``'s target as a start: :func:`prescribed_start` for a
+    curvature target (with ``admissible``: only a fold whose closed form keeps min_length),
+    else :func:`closed_form_start` (folded at omega0). Raises :class:`InfeasibleDesign`
+    where the closed form asks too much."""
+    if isinstance(problem.target, Curvature):
+        return prescribed_start(problem, admissible)
+    return closed_form_start(problem)
+
+
+def closed_form_result(problem: DesignProblem, options: SolveOptions) -> DesignResult:
+    """Solver "closed-form": the closed form (:func:`closed_form_of`) as the result, its
+    NLP transcribed only to measure it (:func:`.measure.result`), no iteration. Raises
+    :class:`InfeasibleDesign` where the closed form asks too much."""
+    t0 = time.perf_counter()
+    start = closed_form_of(problem, admissible=True)
+    t1 = time.perf_counter()
+    nlp = problem.transcribe(start, options=options)
+    t2 = time.perf_counter()
+    residuals = ca.Function("residuals", [nlp.x], [nlp.residuals])(nlp.x0)
+    stats = SolveStats(status="Closed_Form", success=True, iterations=0, build_time=t2 - t1,
+                       solve_time=t1 - t0 + time.perf_counter() - t2,
+                       objective=0.5 * float(ca.sumsqr(residuals)), solver=CLOSED_FORM,
+                       transcription=options.transcription, hessian=options.hessian)
+    return measure.result(problem, nlp, start, nlp.x0, stats, options)
 
 
 def _solve_stage(problem: DesignProblem, nlp: transcription.NLP, start: Start, run: Run,

@@ -8,7 +8,8 @@ parameters and domain on construction, users add their own with :class:`Custom`
 (:func:`from_config`, :meth:`Surface.to_config`; a design file is read by
 :func:`rffqm_nlp.design.load_design`), with the user's code run only behind
 ``--trust`` (:mod:`.user_code`). A designer's mesh or point cloud becomes a surface with
-:class:`Mesh` (:mod:`.meshes`).
+:class:`Mesh` (:mod:`.meshes`). A curvature field with no positions, :class:`Curvature`
+(:mod:`.curvature_target`), is a target too, named by a [target] table of its own.
 
 This module is the top of the targets' surfaces: it imports the pieces, and none of them
 imports it.
@@ -23,7 +24,9 @@ from typing import Any
 
 from ..errors import InputError, SurfaceError
 from ..files import Key, check_table, describe_value, named_path
+from . import curvature_target
 from .builtins import describe, get, names, target_keys
+from .curvature_target import Curvature
 from .custom import Custom
 from .meshes import Mesh
 from .parametric import (DOMAIN_KEY, Domain, Surface, check_surface, checked_value,
@@ -32,7 +35,8 @@ from .point_sets import (MAX_GRID, grid_faces, mean_neighbour_distances, point_s
                          refuse_points)
 from .user_code import check_root, code_of, import_reference, parse_reference, resolve_reference
 
-__all__ = ["DOMAIN_KEY", "MAX_GRID", "MESH_KEYS", "PYTHON_KEYS", "Custom", "Domain", "Mesh",
+__all__ = ["DOMAIN_KEY", "MAX_GRID", "MESH_KEYS", "PYTHON_KEYS", "Curvature", "Custom",
+           "Domain", "Mesh",
            "Surface", "check_surface", "config_of", "describe", "from_config", "get",
            "grid_faces", "mathlib", "mean_neighbour_distances", "names", "parse_reference",
            "point_set_diameter", "rebuildable", "refuse_points", "resolve_reference",
@@ -47,12 +51,14 @@ MESH_KEYS = {"mesh": Key("string", required=True)}
 
 
 def from_config(table: Mapping[str, Any], root: str | Path | None = None,
-                trust: bool = False) -> Surface:
-    """The surface of a ``[target]`` table: ``name = "..."`` plus parameters and an optional
+                trust: bool = False) -> Surface | Curvature:
+    """The target of a ``[target]`` table: ``name = "..."`` plus parameters and an optional
     ``domain = [[u0, u1], [v0, v1]]``, or ``python = "file.py:function"`` (a file relative to
     ``root``, default the current folder) or ``python = "package.module:function"``, plus a
     required ``domain``, or ``mesh = "part.stl"`` (a mesh or point cloud file relative to
-    ``root``: its :class:`Mesh`, by its absolute path).
+    ``root``: its :class:`Mesh`, by its absolute path); or a curvature target, a table with
+    ``size = [Lx, Ly]`` (:func:`.curvature_target.from_config`: numbers K (and H) or kx and
+    ky, or ``python`` and ``fields``).
 
     Code named by ``python`` runs only with ``trust=True`` (a target file from someone else
     must not run code unless asked to); without it :class:`SurfaceError` names the code.
@@ -70,6 +76,8 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
             "and no config names it; rebuild the problem by passing the surface: "
             "DesignProblem(target=<your surface>, **result.problem['design']), or in a file "
             "name a function with python = \"file.py:function\" and domain")
+    if curvature_target.is_curvature_table(table):
+        return curvature_target.from_config(table, root, trust)
     if "mesh" in table:
         mesh = _checked(table, MESH_KEYS)["mesh"]
         try:
@@ -89,8 +97,9 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
         return Custom(import_reference(ref), values["domain"], reference=ref)
     if "name" not in table:
         raise SurfaceError("the [target] table needs name = \"<surface>\" (one of "
-                           f"{', '.join(names())}), python = \"file.py:function\" or "
-                           "mesh = \"part.stl\"")
+                           f"{', '.join(names())}), python = \"file.py:function\", "
+                           "mesh = \"part.stl\" or a curvature field: size = [Lx, Ly] with "
+                           "K or kx and ky")
     name = checked_value(table["name"], Key("choice", choices=tuple(names())),
                          "[target] name")
     values = _checked(table, target_keys(name))
@@ -98,17 +107,21 @@ def from_config(table: Mapping[str, Any], root: str | Path | None = None,
     return get(name, values.pop("domain", None), **values)
 
 
-def config_of(surface: Surface) -> dict:
-    """The ``[target]`` table of ``surface`` (:meth:`Surface.to_config`), or, for a surface
-    that no table can name (a lambda, a closure, a :class:`Mesh` made from arrays), the
-    record ``{"name", "domain", "rebuildable": False, "made_from"}``, which
-    :func:`from_config` refuses with a one-line reason."""
-    check_surface(surface, "surface")
+def config_of(surface: Surface | Curvature) -> dict:
+    """The ``[target]`` table of ``surface`` (:meth:`Surface.to_config`,
+    :meth:`Curvature.to_config`), or, for a target that no table can name (a lambda, a
+    closure, a :class:`Mesh` made from arrays), the record ``{"name", "domain",
+    "rebuildable": False, "made_from"}``, which :func:`from_config` refuses with a one-line
+    reason."""
+    if not isinstance(surface, Curvature):
+        check_surface(surface, "surface")
     try:
         return surface.to_config()
     except SurfaceError:
         pass
-    if isinstance(surface, Custom):
+    if isinstance(surface, Curvature):
+        made_from = "a curvature target whose fields are Python functions"
+    elif isinstance(surface, Custom):
         fn = surface.fn
         made_from = (f"the Python callable {getattr(fn, '__module__', '?')}."
                      f"{getattr(fn, '__qualname__', type(fn).__name__)}")

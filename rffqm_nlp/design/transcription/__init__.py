@@ -12,7 +12,8 @@ A transcription turns the declarative problem (:class:`Setup`, :mod:`.inputs`) i
   (:mod:`.stencil_jacobians`), which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
   uses instead of CasADi's Jacobians of the whole graph.
 
-Both share the residuals of the loss and the Tikhonov terms (:mod:`.loss`), the inline
+Both share the residuals of the loss and the Tikhonov terms (:mod:`.loss`; a curvature
+target's loss: :mod:`.curvature_loss`), the inline
 constraints (angle bounds, multiplier margins, the boundary MV assignment, sides against
 the mean side) and a free correspondence's controls (:class:`Correspondence`,
 :mod:`.correspondence`), so they state the same problem. IPOPT's Hessians of their
@@ -20,6 +21,7 @@ Lagrangian are IPOPT's (:mod:`rffqm_nlp.design.solvers.ipopt.hessians`).
 """
 
 from .correspondence import GRID_CONTROLS, GRID_REGULARIZATION, MIN_GRID_STEP, Correspondence
+from .curvature_loss import CurvatureLoss
 from .inputs import Setup, damping_weights, quaternion_from_rotation
 from .loss import loss_residuals, rotation_from_quaternion, smoothness_residuals
 from .nlp import NLP, controls_of
@@ -27,6 +29,7 @@ from .sequential_nlp import sequential
 from .simultaneous_nlp import simultaneous
 
 __all__ = ["GRID_CONTROLS", "GRID_REGULARIZATION", "MIN_GRID_STEP", "NLP", "Correspondence",
+           "CurvatureLoss",
            "Setup", "controls_of", "damping_weights", "loss_residuals",
            "quaternion_from_rotation", "rotation_from_quaternion", "sequential",
            "simultaneous", "smoothness_residuals"]

@@ -14,6 +14,7 @@ from ...model import vertex as vx
 from ...model.boundary import BoundaryData
 from ...model.marching import boundary_inputs, evaluate, pattern_function
 from .correspondence import Correspondence
+from .curvature_loss import CurvatureLoss
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,7 @@ class Setup:
     reference_omega: float
     correspondence: Correspondence | None = None  # None: the target lattice is fixed
     controls: np.ndarray | None = None  # a warm start's controls (None: the uniform grid's)
+    curvature: CurvatureLoss | None = None  # a curvature target's loss, in place of the lattice's
 
     def controls0(self) -> np.ndarray:
         """The initial guess's controls of the free correspondence (2 Ku Kv,)."""

@@ -13,6 +13,7 @@ import numpy as np
 from ...model.backend import Scalar
 from ...targets import shape
 from . import correspondence
+from .curvature_loss import curvature_residuals
 from .inputs import Setup
 
 
@@ -64,13 +65,17 @@ def loss_residuals(r: Sequence[ca.MX], rotation: ca.MX, translation: Scalar,
 
 
 def objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.MX:
-    """Loss of the coarse lattice r (:func:`loss_residuals`), then the rows on the design
-    alone (:func:`design_residuals`). ``grid``: the controls (Cu, Cv) of a free
-    correspondence (the target lattice at their grid, and their Tikhonov term), or None."""
-    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
-    return ca.vertcat(loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
-                                     setup.weights, setup.spacing),
-                      design_residuals(setup, rigid, boundary_vec, grid))
+    """Loss of the coarse lattice r (:func:`loss_residuals`, or a curvature target's
+    :func:`.curvature_loss.curvature_residuals`), then the rows on the design alone
+    (:func:`design_residuals`). ``grid``: the controls (Cu, Cv) of a free correspondence
+    (the target lattice at their grid, and their Tikhonov term), or None."""
+    if setup.curvature is not None:
+        loss = curvature_residuals(r, setup.curvature)
+    else:
+        target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+        loss = loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
+                              setup.weights, setup.spacing)
+    return ca.vertcat(loss, design_residuals(setup, rigid, boundary_vec, grid))
 
 
 def design_residuals(setup: Setup, rigid, boundary_vec, grid=None):

@@ -14,6 +14,7 @@ from ...model import vertex as vx
 from ...model.marching import crease_quaternion, panel_cell, qmul, rotate_planar
 from ...targets import shape
 from .. import stencils
+from .curvature_loss import curvature_stencils
 from .inputs import Setup
 from .lifting import MeanTree, fold_multipliers_kv
 from .loss import design_residuals, rotation_from_quaternion
@@ -80,7 +81,8 @@ class _StencilRows:
 
 
 class _ResidualStencils(_StencilRows):
-    """The rows of :func:`objective_residuals` as stencils: the position term at every
+    """The rows of :func:`objective_residuals` as stencils: a curvature target's rows
+    (:func:`.curvature_loss.curvature_stencils`), the position term at every
     lattice point (its 3 rows), the fundamental forms at every interior lattice point (its
     row in each of the 6 blocks), and the rows on the design alone
     (:func:`design_residuals`) one instance on the alignment, the boundary vector and a
@@ -96,6 +98,8 @@ class _ResidualStencils(_StencilRows):
 
     def jacobian(self, n_r: int) -> stencils.LocalJacobian:
         weights = self.setup.weights
+        if self.setup.curvature is not None:
+            self.stencils += curvature_stencils(self.setup.curvature, self._points, self._rows)
         if weights.get("forms", 0) > 0:
             self._forms(weights["forms"])
         if weights.get("position", 0) > 0:
