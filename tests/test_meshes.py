@@ -14,7 +14,7 @@ import trimesh
 from scipy.spatial import Delaunay
 
 import rffqm_nlp as rq
-from rffqm_nlp.targets import mesh_input, mesh_topology, meshes, parametrization
+from rffqm_nlp.targets import mesh_domain, mesh_input, mesh_topology, meshes, parametrization
 from rffqm_nlp.errors import SurfaceError
 from rffqm_nlp.targets.meshes import MAX_DEVIATION, Mesh
 from rffqm_nlp.targets.shape import distances_to, relative_fit
@@ -134,6 +134,85 @@ def test_corners():
     assert found(*outline((0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2))) is None
     assert found(*outline((0, 0), (2, 1), (0, 2), (0.5, 1))) is None
     assert found(*outline((0, 0), (0, 1), (1, 1), (1, 0))) is None  # clockwise: turns right
+
+
+def test_corners_of_a_ragged_or_bumpy_outline():
+    """A square's outline jittered by a third of its points' spacing (a triangulated cloud's
+    boundary): its four corners, not its jags; a square with a bump of 152 deg on a side:
+    the four corners, the fifth run being CORNER_GAP blunter; a pentagon's five equal
+    corners: none."""
+    def found(points, window=parametrization.CORNER_WINDOW):
+        pts = np.c_[points, np.zeros(len(points))]
+        return meshes.corners(pts, np.tile([0.0, 0.0, 1.0], (len(pts), 1)),
+                              np.arange(len(pts)), window)
+
+    def outline(*vertices, per_side=30):
+        t = np.linspace(0, 1, per_side, endpoint=False)[:, None]
+        ring = np.array(vertices, dtype=float)
+        return np.concatenate([a + t * (b - a) for a, b in zip(ring, np.roll(ring, -1, 0))])
+
+    square = outline((0, 0), (1, 0), (1, 1), (0, 1))
+    jagged = square + np.random.default_rng(5).uniform(-1, 1, square.shape) / 90
+    at = found(jagged)
+    assert at is not None and np.abs(at - [0, 30, 60, 90]).max() <= 2
+    bump = outline((0, 0), (2, 0), (2, 2), (1, 2.25), (0, 2))
+    assert list(found(bump)) == [0, 30, 60, 120]
+    pentagon = np.c_[np.cos(2 * np.pi * np.arange(5) / 5), np.sin(2 * np.pi * np.arange(5) / 5)]
+    assert found(outline(*pentagon)) is None
+
+
+def random_cloud(name: str, points: int, seed: int) -> tuple:
+    """``points`` uniform random parameters of a built-in surface, its points with Gaussian
+    noise of 0.2% of its diameter: (the surface, the points (points, 3))."""
+    surface = rq.surfaces.get(name)
+    rng = np.random.default_rng(seed)
+    (u0, u1), (v0, v1) = surface.domain
+    pts = surface.point(rng.uniform(u0, u1, points), rng.uniform(v0, v1, points))
+    return surface, pts + rng.normal(0, 0.002 * surface.diameter(), pts.shape)
+
+
+@pytest.mark.parametrize("name, seed", [("sphere_cap", 0), ("saddle", 1),
+                                        ("hyperboloid", 3), ("torus_patch", 2)])
+def test_a_random_cloud_with_a_ragged_boundary_is_covered(name, seed):
+    """Issue 44's cloud: 6,000 random points of a patch with noise of 0.2% of its diameter
+    (a ragged boundary, whose jags must not count as corners, and sparse spots, which must
+    not become holes): the conformal rectangle, whose domain covers
+    at least 0.9 of the surface's area, and whose lattice lies on the surface (within 0.2%
+    of the diameter, the noise)."""
+    surface, pts = random_cloud(name, 6000, seed)
+    cloud = Mesh(pts)
+    assert cloud.parametrization == "rectangle"
+    assert rq.shape.surface_area(cloud) >= 0.9 * rq.shape.surface_area(surface)
+    assert _lattice_error(cloud, surface) < 0.002
+
+
+def test_a_ragged_mesh_is_mapped_onto_a_rectangle():
+    """A mesh with a ragged boundary (random points of the saddle, triangulated): the
+    conformal rectangle, covering 0.95 of the surface."""
+    surface = rq.surfaces.get("saddle")
+    rng = np.random.default_rng(2)
+    (u0, u1), (v0, v1) = surface.domain
+    uv = np.c_[rng.uniform(u0, u1, 3000), rng.uniform(v0, v1, 3000)]
+    tri, keep = mesh_domain.cloud_faces(uv)
+    faces = tri.simplices[keep]
+    faces = np.where((parametrization.signed_areas(faces, uv) < 0)[:, None], faces[:, ::-1],
+                     faces)
+    mesh = Mesh((surface.point(uv[:, 0], uv[:, 1]), faces))
+    assert mesh.parametrization == "rectangle"
+    assert rq.shape.surface_area(mesh) >= 0.95 * rq.shape.surface_area(surface)
+
+
+def test_a_cloud_triangulation_keeps_its_sparse_spots_and_drops_its_bays():
+    """cloud_faces drops the long triangles that reach the outside through long ones (a
+    bay) and keeps those inside (a sparse spot), so the region stays a disk."""
+    rng = np.random.default_rng(0)
+    uv = rng.uniform(0, 1, (4000, 2))
+    uv = uv[(np.linalg.norm(uv - (0.5, 0.5), axis=1) > 0.06)  # a sparse spot inside,
+            | (rng.uniform(size=len(uv)) < 0.02)]           # a few points left in it
+    uv = uv[~((uv[:, 0] > 0.45) & (uv[:, 0] < 0.55) & (uv[:, 1] < 0.3))]  # a bay
+    tri, keep = mesh_domain.cloud_faces(uv)
+    centre = tri.find_simplex(np.array([[0.5, 0.5], [0.5, 0.1]]))
+    assert keep[centre[0]] and not keep[centre[1]]
 
 
 def test_a_disk_without_corners_uses_lscm():

@@ -29,13 +29,24 @@ def polygon_mask(polygon: np.ndarray) -> np.ndarray:
 
 
 def cloud_faces(uv: np.ndarray) -> tuple[Delaunay, np.ndarray]:
-    """The Delaunay triangulation of uv (n, 2) and the mask (m,) of its triangles whose
-    longest edge is at most three times the median longest edge (which drops the long
-    triangles spanning gaps and concave bays)."""
+    """The Delaunay triangulation of uv (n, 2) and the mask (m,) of the triangles kept: all
+    but the long ones (longest edge above three times the median longest edge) that reach
+    the outside through long ones, peeled from the convex hull inwards. That drops the
+    long triangles spanning concave bays and gaps open to the outside, and keeps a long
+    one inside, where a random sample left a sparse spot (dropped, it was a hole, and the
+    cloud no disk)."""
     tri = Delaunay(uv)
     vertices = uv[tri.simplices]
     longest = np.linalg.norm(vertices - np.roll(vertices, 1, axis=1), axis=2).max(axis=1)
-    return tri, longest <= 3 * np.median(longest)
+    long = longest > 3 * np.median(longest)
+    dropped = np.zeros(len(long), dtype=bool)
+    front = np.flatnonzero(long & (tri.neighbors == -1).any(axis=1))
+    while front.size:
+        dropped[front] = True
+        near = tri.neighbors[front].ravel()
+        near = np.unique(near[near >= 0])
+        front = near[long[near] & ~dropped[near]]
+    return tri, ~dropped
 
 
 def cloud_mask(uv: np.ndarray) -> np.ndarray:
