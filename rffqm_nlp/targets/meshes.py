@@ -30,8 +30,12 @@ A designer's shape becomes a smooth parametric surface r(u, v) in four steps
    mesh's area. A point cloud is projected onto its best-fit plane and a first spline fitted
    there (step 4, with ``smoothing``); its points, moved onto that smooth surface and
    triangulated in the plane (Delaunay, the long triangles of
-   :func:`~.mesh_domain.cloud_faces` dropped), take the conformal rectangle when that
-   triangulation is a disk with four corners that uses every point, else the projection.
+   :func:`~.mesh_domain.cloud_faces` that reach the outside dropped), take the conformal
+   rectangle when that triangulation is a disk with four corners that uses every point
+   (its boundary is ragged: corners with the reach :data:`CLOUD_CORNER_WINDOW`, flipped
+   slivers up to :data:`CLOUD_SLIVER_AREA`), else the projection. A boundary's corners
+   need a reach of at least :data:`CORNER_REACH` vertices, and of more than four runs the
+   four sharpest count where the fifth is :data:`CORNER_GAP` blunter.
    Either way the parameter image is rotated so that its smallest bounding rectangle is
    axis-aligned (:func:`align`).
 3. **Domain.** The rectangle itself for a conformal rectangle (a point cloud's inset by
@@ -87,13 +91,14 @@ from .mesh_input import (FORMATS, MAX_FACES, MAX_FILE_BYTES, MAX_PIECES, MAX_POI
                          MIN_POINTS, is_mesh_file, load, quiet_trimesh)
 from .mesh_topology import boundary_loop, check_disk
 from .parametric import Surface
-from .parametrization import (CORNER_ANGLE, CORNER_WINDOW, GRAPH_ANGLE, MAX_AREA_SPREAD,
-                              SLIVER_AREA, TIE, align, cloud_rectangle, conformal_rectangle,
-                              corners, parametrize, project)
+from .parametrization import (CLOUD_CORNER_WINDOW, CLOUD_SLIVER_AREA, CORNER_ANGLE,
+                              CORNER_GAP, CORNER_REACH, CORNER_WINDOW, GRAPH_ANGLE,
+                              MAX_AREA_SPREAD, SLIVER_AREA, TIE, align, cloud_rectangle,
+                              conformal_rectangle, corners, parametrize, project)
 from .splines import KNOT_SPANS, fit_spline, in_units, knot_spans, smoothed
 
-__all__ = ["CLOUD_INSET", "CLOUD_POINTS_PER_CELL", "CLOUD_SMOOTHING", "CORNER_ANGLE",
-           "CORNER_WINDOW", "DEVIATION_GRID", "FORMATS", "GRAPH_ANGLE", "KNOT_SPANS",
+__all__ = ["CLOUD_CORNER_WINDOW", "CLOUD_INSET", "CLOUD_POINTS_PER_CELL", "CLOUD_SLIVER_AREA",
+           "CLOUD_SMOOTHING", "CORNER_ANGLE", "CORNER_GAP", "CORNER_REACH", "CORNER_WINDOW", "DEVIATION_GRID", "FORMATS", "GRAPH_ANGLE", "KNOT_SPANS",
            "MAX_AREA_SPREAD", "MAX_DEVIATION", "MAX_FACES", "MAX_FILE_BYTES", "MAX_PIECES",
            "MAX_POINTS", "MESH_POINTS_PER_CELL", "MESH_SMOOTHING", "MIN_POINTS", "Mesh",
            "RASTER", "SLIVER_AREA", "TIE", "align", "closest_on_mesh", "conformal_rectangle",
