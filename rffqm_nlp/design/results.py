@@ -177,7 +177,8 @@ class SolveStats:
     """How a design was solved.
 
     * ``status``: the solver's final status ("Solve_Succeeded", "Fit_Reached" when
-      stop_rms was reached, or IPOPT's/the Levenberg-Marquardt solver's failure status);
+      stop_rms was reached, "Closed_Form" for solver "closed-form", or IPOPT's/the
+      Levenberg-Marquardt solver's failure status);
       ``success``: whether that status is a success;
     * ``iterations``: all iterations, of every solver and continuation stage;
       ``gauss_newton_iterations``: those of IPOPT with the Gauss-Newton Hessian;
