@@ -14,11 +14,14 @@ motion (``measure.collision_fields``) and the curvature maps, ``--repeat`` times
 fresh target each (its CasADi graph built, as after a solve, nothing else), the fastest
 counts. "result / solve" is the three together over the solve, the issue's goal at most
 :data:`GOAL`; "same answers" compares the baseline's: the largest difference of the fit
-values (relative to the larger) and whether the collision reports agree.
+values (relative to the larger) and whether the collision reports agree; "peak" is the
+measuring process's peak RSS. Every child runs with at most ``--memory`` GB of address
+space; one that runs out is reported, not waited for. ``--keep DIR`` keeps the designs
+(and their solve times) in DIR and reuses those already there.
 
     python benchmarks/result_phase.py [--sizes 20 40 100 200] [--large-from 100]
         [--targets sphere_cap hyperboloid quarter_vase] [--baseline REV|none]
-        [--repeat 3] [--out docs/benchmarks/result_phase.md]
+        [--repeat 3] [--memory 3] [--keep DIR] [--out docs/benchmarks/result_phase.md]
     python benchmarks/result_phase.py --smoke   (the sphere cap at 4 x 4 panels, one
         repetition, the baseline, temporary output)
 """
@@ -28,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import tempfile
 import time
@@ -42,7 +46,8 @@ if "PYTHONPATH" not in os.environ:  # a child given the package to measure keeps
 
 import rffqm_nlp as rq  # noqa: E402
 from common import (TARGETS, Run, add_output, export_package, fmt,  # noqa: E402
-                    markdown_table, output, ratio, run_child, target_problem, write_page)
+                    markdown_table, output, peak_rss_mb, ratio, run_child, target_problem,
+                    write_page)
 
 #: the revision before the result phase was made cheap (issue 43, item 3)
 BASELINE = "48b2324"
@@ -50,7 +55,7 @@ GOAL = 0.10  # the result phase over the solve (issue 43)
 PATTERN_FIELDS = ("alpha", "beta", "sigma", "lh", "lv", "mu", "X")
 COLUMNS = ("target", "panels", "iterations", "solve [s]", "code", "fit [s]",
            "collisions [s]", "curvature [s]", "result phase [s]", "result / solve", "goal",
-           "this / baseline", "same answers")
+           "peak [MB]", "this / baseline", "same answers")
 
 
 # ------------------------------------------------------------------ children
@@ -80,6 +85,7 @@ def solve_child(target: str, n: int, repeat: int, path: str) -> dict:
             solve = time.perf_counter() - t0 - sum(spent)
             best = solve if best is None else min(best, solve)
     np.savez(path, omega=res.omega, folded=res.folded, target_points=res.target_points,
+             solve=best, iterations=res.stats.iterations,
              **{f: np.asarray(getattr(res.pattern, f)) for f in PATTERN_FIELDS})
     return {"solve": best, "iterations": res.stats.iterations}
 
@@ -111,7 +117,16 @@ def measure_child(target: str, n: int, repeat: int, path: str) -> dict:
             for key, dt in zip(times, (t1 - t0, t2 - t1, t3 - t2)):
                 times[key].append(dt)
     return {**{k: min(v) for k, v in times.items()}, "fit_values": fit, "report": report,
-            "package": str(Path(rq.__file__).parent)}
+            "peak": peak_rss_mb(), "package": str(Path(rq.__file__).parent)}
+
+
+def child(mode: str, job: list, memory: float, env: dict | None = None) -> dict:
+    """A child of this script (``mode``: --solve or --measure) with at most ``memory`` GB
+    of address space; {"failed": the last line of its error} when it fails."""
+    try:
+        return run_child(__file__, mode, json.dumps(job), f"{memory:g}", env=env)
+    except RuntimeError as exc:
+        return {"failed": (str(exc).strip().splitlines() or ["?"])[-1][:120]}
 
 
 # ------------------------------------------------------------------ the table
@@ -130,17 +145,23 @@ def table(rows: list[dict]) -> list[str]:
             m = r.get(code)
             if m is None:
                 continue
+            name = code if code == "this" else r["baseline_rev"]
+            if "failed" in m:
+                cells.append([r["target"], f"{r['n']} x {r['n']}", fmt(r["iterations"], "d"),
+                              fmt(r["solve"], ".3f"), name, f"failed: {m['failed']}",
+                              *["-"] * (len(COLUMNS) - 6)])
+                continue
             phase = m["fit"] + m["collisions"] + m["curvature"]
             share = phase / r["solve"]
             base = r.get("baseline")
+            base = None if base is None or "failed" in base or code != "this" else base
             cells.append([
                 r["target"], f"{r['n']} x {r['n']}", fmt(r["iterations"], "d"),
-                fmt(r["solve"], ".3f"), code if code == "this" else r["baseline_rev"],
-                fmt(m["fit"], ".3f"), fmt(m["collisions"], ".3f"), fmt(m["curvature"], ".4f"),
-                fmt(phase, ".3f"), f"{100 * share:.1f}%", "yes" if share <= GOAL else "no",
+                fmt(r["solve"], ".3f"), name, fmt(m["fit"], ".3f"), fmt(m["collisions"], ".3f"),
+                fmt(m["curvature"], ".4f"), fmt(phase, ".3f"), f"{100 * share:.1f}%",
+                "yes" if share <= GOAL else "no", fmt(m["peak"], ".0f"),
                 ratio(phase, base["fit"] + base["collisions"] + base["curvature"])
-                if code == "this" and base else "-",
-                agreement(m, base) if code == "this" and base else "-"])
+                if base else "-", agreement(m, base) if base else "-"])
     return markdown_table(COLUMNS, cells)
 
 
@@ -151,28 +172,40 @@ def main() -> None:
     ap.add_argument("--targets", nargs="*", default=list(TARGETS), choices=TARGETS)
     ap.add_argument("--baseline", default=BASELINE, help="a git revision, or none")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--memory", type=float, default=3.0, help="GB of address space a child "
+                    "may use (default: %(default)s)")
+    ap.add_argument("--keep", type=Path, default=None, help="a folder for the designs; "
+                    "those already there are reused with their solve times")
     add_output(ap, "result_phase")
     args = ap.parse_args()
     if args.smoke:
         args.sizes, args.targets, args.repeat = [4], ["sphere_cap"], 1
     clock = Run()
     package = None if args.baseline == "none" else export_package(args.baseline)
-    folder = Path(tempfile.mkdtemp(prefix="rffqm-result-phase-"))
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="rffqm-result-phase-"))
+    folder.mkdir(parents=True, exist_ok=True)
     rows = []
     for n in args.sizes:
         for target in args.targets[:1] if n >= args.large_from else args.targets:
-            path = str(folder / f"{target}_{n}.npz")
-            solves = args.repeat if n < args.large_from else 1
-            row = {"target": target, "n": n, "baseline_rev": args.baseline,
-                   **run_child(__file__, "--solve", json.dumps([target, n, solves, path]))}
-            job = json.dumps([target, n, args.repeat, path])
-            row["this"] = run_child(__file__, "--measure", job)
+            path = folder / f"{target}_{n}.npz"
+            row = {"target": target, "n": n, "baseline_rev": args.baseline}
+            if path.exists():
+                with np.load(path) as kept:
+                    row.update(solve=float(kept["solve"]), iterations=int(kept["iterations"]))
+            else:
+                solves = args.repeat if n < args.large_from else 1
+                row.update(child("--solve", [target, n, solves, str(path)], args.memory))
+            if "failed" in row:
+                print(f"{target} at {n}: the solve failed: {row['failed']}", flush=True)
+                continue
+            job = [target, n, args.repeat, str(path)]
+            row["this"] = child("--measure", job, args.memory)
             if package is not None:
-                row["baseline"] = run_child(__file__, "--measure", job,
-                                            env={"PYTHONPATH": str(package)})
+                row["baseline"] = child("--measure", job, args.memory,
+                                        env={"PYTHONPATH": str(package)})
             rows.append(row)
             print({k: row[k] for k in ("target", "n", "solve")},
-                  {c: {k: row[c][k] for k in ("fit", "collisions", "curvature")}
+                  {c: {k: row[c].get(k) for k in ("fit", "collisions", "curvature", "failed")}
                    for c in ("this", "baseline") if c in row}, flush=True)
     text = "\n".join([
         *clock.preamble("result_phase.py"),
@@ -187,8 +220,10 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 3 and sys.argv[1] in ("--solve", "--measure"):
-        child = solve_child if sys.argv[1] == "--solve" else measure_child
-        print(json.dumps(child(*json.loads(sys.argv[2])), default=str))
+    if len(sys.argv) == 4 and sys.argv[1] in ("--solve", "--measure"):
+        limit = int(float(sys.argv[3]) * 2 ** 30)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+        work = solve_child if sys.argv[1] == "--solve" else measure_child
+        print(json.dumps(work(*json.loads(sys.argv[2])), default=str))
     else:
         main()
