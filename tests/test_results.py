@@ -113,7 +113,7 @@ def test_a_tampered_folded_state_is_refused(result, tmp_path):
 def test_version_1_is_migrated_its_solve_keys_moved_from_design(result, tmp_path):
     data = result.to_dict()
     design = {**data["problem"]["design"], **data["problem"]["solve"]}
-    new = ("multistart", "seed", "boundary_knots")  # not in version 1's [design]
+    new = ("multistart", "seed", "boundary_knots", "start")  # not in version 1's [design]
     for key in new:
         del design[key]
     v1 = {**data, "version": 1, "problem": {"target": data["problem"]["target"],

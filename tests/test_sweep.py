@@ -207,7 +207,8 @@ BAD_STUDIES = [
     ("[sweep]\n\"target.radius\" = [4.0, 4]\n", "are the same problem"),
     ("[sweep]\n\"design.layout\" = [\"zigzag\"]\n", "layout must be one of"),
     ("[sweep]\n\"design.panels\" = [5]\n", "[design] panels[0] must be an even whole number"),
-    ("[solve]\nstarts = 3\n", "unknown key [solve] starts; did you mean multistart?"),
+    ("[solve]\nmultistarts = 3\n",
+     "unknown key [solve] multistarts; did you mean multistart?"),
     ("[sweep]\n\"solve.multistart\" = [0]\n", "[solve] multistart must be a whole number"),
     ("[sweep]\n\"solve.starts\" = [1]\n", "unknown solve key starts"),
     ("[design]\nstop_rms = 0.01\n", "[design] stop_rms is a solve option: move it to the "
@@ -386,8 +387,9 @@ def test_multistart_rejects_bad_arguments():
         prob.solve(TINY, multistart=2, seed=-1)
     with pytest.raises(InputError, match="exclude each other"):
         prob.solve(TINY, multistart=2, warm_start=object())
-    with pytest.raises(InputError, match=r"unknown key \[solve\] starts; did you mean multistart"):
-        prob.solve(TINY, starts=2)
+    with pytest.raises(InputError, match=r"unknown key \[solve\] multi_start; did you mean "
+                                         r"multistart"):
+        prob.solve(TINY, multi_start=2)
 
 
 # --------------------------------------------------------------------------- command line
