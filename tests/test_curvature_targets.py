@@ -290,3 +290,31 @@ def test_a_design_file_names_a_curvature_target(tmp_path):
             rq.surfaces.from_config(table, root=tmp_path, trust=True)
     assert curvature_target.is_curvature_table({"K": 1.0}) and not (
         curvature_target.is_curvature_table({"name": "sphere_cap", "radius": 2.0}))
+
+
+def test_a_multistart_keeps_the_start_of_the_smallest_curvature_error():
+    """A curvature target's designs are their own lattices (fit.rms 0): a multistart
+    compares their curvature errors instead."""
+    problem = rq.DesignProblem(target=SPHERE, panels=(8, 8))
+    best = problem.solve(multistart=3, seed=1)
+    runs = best.stats.multistart["runs"]
+    errors = [(replace(problem, alpha0=r["alpha0"], omega0=r["omega0"]).solve(
+        ).fit.curvature_rms, r["start"]) for r in runs if r["rms"] is not None]
+    assert len(errors) >= 2 and all(r["rms"] == 0.0 for r in runs if r["rms"] is not None)
+    assert best.stats.multistart["chosen"] == min(errors)[1]
+    assert best.fit.curvature_rms == min(errors)[0]
+
+
+def test_the_design_command_prints_the_curvature_error_and_the_notes(tmp_path):
+    from typer.testing import CliRunner
+
+    from rffqm_nlp.cli import app
+
+    (tmp_path / "saddle.toml").write_text(
+        "[target]\nkx = 0.1\nky = -0.1\nsize = [10.0, 10.0]\n\n"
+        "[design]\npanels = [8, 8]\nalpha0 = 1.2\n\n[solve]\nsolver = \"closed-form\"\n")
+    run = CliRunner().invoke(app, ["design", str(tmp_path / "saddle.toml"), "--out",
+                                   str(tmp_path / "out"), "--quiet"])
+    assert run.exit_code == 0, run.output
+    assert "curvature error: RMS, max per cell" in run.output
+    assert "No surface realises this prescription" in run.output

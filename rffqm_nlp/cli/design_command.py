@@ -86,7 +86,10 @@ def design(
         result = _solve(problem, options, quiet)
         with replace_folder(out) as tmp:
             _write_design(tmp, result, problem)
-    Console().print(_summary(result, out))
+    console = Console()
+    console.print(_summary(result, out))
+    for note in result.notes:
+        console.print(output.shown(note))
 
 
 #: progress label of each SolveOptions.solver
@@ -174,6 +177,9 @@ def _summary(result: "DesignResult", out: Path) -> Table:
          f"{fit.rms_surface_vertices:.3e}, {fit.hausdorff_vertices:.3e}"),
         ("coverage (lattice area / target area)", f"{fit.coverage:.4g}"),
         ("best plane RMS, for comparison (/ diameter)", f"{fit.plane_rms:.3e}"),
+        *([("curvature error: RMS, max per cell (/ max |K|)",
+            f"{fit.curvature_rms:.3e}, {fit.curvature_max:.3e}")]
+          if fit.curvature_rms is not None else []),
         ("smallest side / mean side", f"{fit.min_side_over_mean:.4g}"),
         ("smallest sector angle (rad)", f"{fit.min_sector_angle:.4g}"),
         ("collision-free from flat to omega", _collision_text(fit)),
