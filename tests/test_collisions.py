@@ -313,8 +313,8 @@ def test_cheap_bounds_hold_on_the_random_recipe():
 def coarse_rows(geo: Geometry, states: States, K: int, clearance: float):
     """The broad phase's rows (n, 4) and bounds (n,) of every step between the first K
     states, its chunks put together."""
-    chunks = [c for a in range(K - 1)
-              for c in broad.coarse_rows(geo, states, broad.step(geo, states, a, a + 1, clearance))]
+    steps = [broad.step(geo, states, a, a + 1, clearance) for a in range(K - 1)]
+    chunks = [c for s in steps for c in broad.coarse_rows(geo, states, s)]
     return np.concatenate([r for r, _ in chunks]), np.concatenate([m for _, m in chunks])
 
 

@@ -201,12 +201,12 @@ def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
     query with twice the largest R when R varies by at most SPREAD or the pattern has at
     most ONE_QUERY pairs, and the first 64 (or fewer, halved until the tree counts at most
     ROWS pairs within twice the largest R of them) let it expect at most 0.7 ROWS pairs
-    (all pairs fit in ROWS: no count). Otherwise each pair is found once, from the panel with the larger R:
-    panels by decreasing R, a block of them queried (a tree of its own) against a tree on
-    the panels from the block on, with twice the block's largest R; a block holds panels
-    whose R is within CLASS of its first's (so that a few large panels do not make every
-    query large), as many as the pairs per panel of the last query (or the first 64's)
-    allow for 0.7 ROWS pairs."""
+    (all pairs fit in ROWS: no count). Otherwise each pair is found once, from the panel
+    with the larger R: panels by decreasing R, a block of them queried (a tree of its own)
+    against a tree on the panels from the block on, with twice the block's largest R; a
+    block holds panels whose R is within CLASS of its first's (so that a few large panels
+    do not make every query large), as many as the pairs per panel of the last query (or
+    the first 64's) allow for 0.7 ROWS pairs."""
     uniform = R.max() <= SPREAD * R.min()
     order = np.arange(len(R)) if uniform else np.argsort(-R, kind="stable")
     X, R, ij = C[order], R[order], geo.ij[order]
@@ -214,7 +214,8 @@ def _close_pairs(geo: Geometry, C: np.ndarray, R: np.ndarray, slack: float):
     P, c0, base = len(X), 0, 0
     rest = cKDTree(X)
     found, size = _first_block(rest, X, 2 * float(top[0]) + slack)
-    if (uniform or P * (P - 1) // 2 <= ONE_QUERY) and found * P / min(size, P) <= 1.4 * ROWS:
+    one = uniform or P * (P - 1) // 2 <= ONE_QUERY
+    if one and found * P / min(size, P) <= 1.4 * ROWS:   # ordered pairs, self included
         i, j = rest.query_pairs(2 * float(top[0]) + slack, output_type="ndarray").T
         yield from _kept(order, R, ij, i, j, norm(X[i] - X[j]), slack)
         return

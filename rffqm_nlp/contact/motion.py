@@ -3,22 +3,23 @@
 * Along the motion: omega is sampled on a coarse grid (steps of at most ``MAX_STEP``); on
   a step [w0, w1] a candidate pair (:func:`~rffqm_nlp.contact.broad.coarse_rows`) is
   certified clear when (d(w0) + d(w1) - m) / 2 > clearance, where d is the panel distance
-  and m bounds how far the pair's distance can change over the step: SAFETY times the largest relative displacement of a vertex of
-  one panel against a vertex of the other between w0 and w1 (:func:`pair_bound`; a
-  rigid motion's displacement is affine on a panel, so its extreme is at a vertex; the
-  16 vertex pairs are compared), or SAFETY times the largest displacement of a vertex of
-  one panel in the frame of the other (:func:`frame_bound`; origin at its corner a, axes
-  along its edge a -> b and its normal), whichever is smaller: in its own frame a panel
-  is still and the other moves rigidly, so the distance changes by at most that. Both
-  are computed only after a coarser bound, the centres' relative displacement plus each
-  panel's largest vertex displacement about its centre, has failed to certify the step,
-  the frame bound first (it certifies nearly all the pairs that get this far: panels
-  turning together, and panels hinged across a very thin panel, as in side-length LP
-  patterns, which stay close while their far corners move a lot but hardly move in one
-  another's frame), the vertex pairs only where it has not. Distances are
-  first bounded from below cheaply (:func:`~rffqm_nlp.contact.narrow.lower_bound`); the
-  exact distance is computed only where that bound does not certify the step, and only
-  an exact distance reports a contact.
+  and m bounds how far the pair's distance can change over the step: SAFETY times the
+  largest relative displacement of a vertex of one panel against a vertex of the other
+  between w0 and w1 (:func:`pair_bound`; a rigid motion's displacement is affine on a
+  panel, so its extreme is at a vertex; the 16 vertex pairs are compared), or SAFETY
+  times the largest displacement of a vertex of one panel in the frame of the other
+  (:func:`frame_bound`; origin at its corner a, axes along its edge a -> b and its
+  normal), whichever is smaller: in its own frame a panel is still and the other moves
+  rigidly, so the distance changes by at most that. Both are computed only after a
+  coarser bound, the centres' relative displacement plus each panel's largest vertex
+  displacement about its centre, has failed to certify the step, the frame bound first
+  (it certifies nearly all the pairs that get this far: panels turning together, and
+  panels hinged across a very thin panel, as in side-length LP patterns, which stay
+  close while their far corners move a lot but hardly move in one another's frame), the
+  vertex pairs only where it has not. Distances are first bounded from below cheaply
+  (:func:`~rffqm_nlp.contact.narrow.lower_bound`); the exact distance is computed only
+  where that bound does not certify the step, and only an exact distance reports a
+  contact.
 * Uncertified pairs are followed into the halves of the step (one batched fold per
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
@@ -94,11 +95,11 @@ def first_contact(geo: Geometry, w_max: float, clearance: float,
 
 
 def steps(geo: Geometry, st: States, a: int, b: int, clearance: float, tol: float):
-    """The step from state ``a`` to state ``b`` of ``st`` as :class:`~.broad.Step` s in
-    order: halved (its midpoint state added to ``st``) while its reaches are far
-    (SPLIT_REACH) and it is longer than ``tol``, the halves likewise. The halves are the
-    ones :func:`_refine` would follow, so the samples that can report a contact stay the
-    same."""
+    """The step from state ``a`` to state ``b`` of ``st``, in order, as the broad phase's
+    steps (:class:`~rffqm_nlp.contact.broad.Step`): halved (its midpoint state added to
+    ``st``) while its reaches are far (SPLIT_REACH) and it is longer than ``tol``, the
+    halves likewise. The halves are the ones :func:`_refine` would follow, so the samples
+    that can report a contact stay the same."""
     s = broad.step(geo, st, a, b, clearance)
     w = st.omegas
     if not (s.far(SPLIT_REACH) and w[b] - w[a] > tol):
