@@ -159,7 +159,7 @@ RESULT_FILES = BAD_FILES + [
     ("missing", lambda folder, name: folder / name, ["no design result"]),
     ("no-result", _bytes(b'{"format": "something else"}'), ["not a design result"]),
     ("cut", _bytes(json.dumps({"format": results.FORMAT, "version": 2}).encode()),
-     ["the key 'omega' is missing"]),
+     ["the key 'boundary' is missing"]),
     ("broken-v1", _bytes(json.dumps({"format": results.FORMAT, "version": 1,
                                      "problem": 5}).encode()),
      ["broken design result (TypeError"]),

@@ -184,6 +184,10 @@ def _summary(result: "DesignResult", out: Path) -> Table:
         ("smallest sector angle (rad)", f"{fit.min_sector_angle:.4g}"),
         ("collision-free from flat to omega", _collision_text(fit)),
         ("designed omega (rad)", f"{result.omega:.6g}"),
+        *[(f"state {k + 1}: omega (rad), RMS to lattice, to surface (/ diameter)",
+           f"{state.omega:.6g}, {state.fit.rms:.3e}, {state.fit.rms_surface:.3e}"
+           + ("" if state.fit.collision_free else "; not collision-free"))
+          for k, state in enumerate(result.states) if result.other_states],
         ("iterations", str(stats.iterations)),
         ("time (s)", f"{stats.build_time + stats.solve_time:.1f} "
                      f"(build {stats.build_time:.1f})"),

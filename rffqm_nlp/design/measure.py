@@ -18,7 +18,7 @@ from ..targets import shape, surfaces
 from ..targets.curvature_target import Curvature
 from . import curvature_fit, transcription
 from .options import SolveOptions
-from .results import DesignResult, Fit, SolveStats
+from .results import DesignResult, Fit, SolveStats, State
 
 if TYPE_CHECKING:  # for type hints only: the problem calls this module
     from .problem import DesignProblem, Start
@@ -43,28 +43,55 @@ def result(problem: DesignProblem, nlp: transcription.NLP, start: Start, x: np.n
     NaN or inf ("non_finite")."""
     require_finite({"the design vector": x, "the objective": stats.objective}, stats, x)
     vec, omega = (np.asarray(v.full()).ravel() for v in nlp.unpack(x))
-    omega = float(omega[0])
     bd = BoundaryData.from_vector(vec, start.boundary.sigma, 2 * problem.N, 2 * problem.M)
+    pattern = remarched(bd, stats, x)
+    check_constraints(problem, pattern, stats, x)
+    state, notes = measured_state(problem.target, pattern, float(omega[0]),
+                                  nlp.folded_array(x), nlp.target_array(x, start.target_points),
+                                  stats, x)
+    state = replace(state, fit=replace(state.fit, **collision_fields(pattern, state.omega)))
+    config = problem.config(options)
+    return DesignResult(boundary=bd, omega=state.omega, pattern=pattern, folded=state.folded,
+                        target_points=state.target_points, rotation=state.rotation,
+                        translation=state.translation, fit=state.fit, stats=stats,
+                        problem=config, x=x, curvature=state.curvature,
+                        target_grid=target_grid(problem.target, config["target"]),
+                        notes=notes)
+
+
+def remarched(bd: BoundaryData, stats: SolveStats, x: np.ndarray) -> Pattern:
+    """The pattern of a solver's boundary data re-marched with the NumPy model; raises
+    :class:`SolverFailed` ("remarch_failed", with ``stats`` and ``x``) where it fails."""
     try:
-        pattern = numpy_model.march(bd)
+        return numpy_model.march(bd)
     except MarchingError as exc:
         raise SolverFailed(f"the solution fails re-marching with the NumPy model: {exc}",
                            status="remarch_failed", stats=stats, last_iterate=x) from exc
+
+
+def measured_state(target: surfaces.Surface | Curvature, pattern: Pattern, omega: float,
+                   graph: np.ndarray, target_points: np.ndarray, stats: SolveStats,
+                   x: np.ndarray) -> tuple[State, tuple[str, ...]]:
+    """One state of a solved design and its notes: ``pattern`` (re-marched) folded at
+    ``omega`` by the NumPy model, checked against the graph's folded state ``graph``
+    (2N+1, 2M+1, 3), aligned onto ``target_points`` (N+1, M+1, 3; a curvature target's
+    lattice is its own), its fit (for a curvature target:
+    :func:`.curvature_fit.curvature_target_fit`) and curvature (:func:`.curvature_fit.measured`),
+    its collision fields not yet measured (:func:`collision_fields`). Raises
+    :class:`SolverFailed` ("remarch_mismatch", "non_finite")."""
     Y = numpy_model.fold(pattern, omega)
-    gap = np.abs(Y - nlp.folded_array(x)).max()
+    gap = np.abs(Y - graph).max()
     if gap > REMARCH_AGREEMENT * np.abs(Y).max():
         raise SolverFailed(f"the NumPy re-march disagrees with the CasADi graph by {gap:.3g}",
                            status="remarch_mismatch", stats=stats, last_iterate=x)
-    check_constraints(problem, pattern, stats, x)
-    target_points = nlp.target_array(x, start.target_points)
     R, t, _ = shape.kabsch(shape.coarse_grain(Y), target_points)
     folded = Y @ R.T + t
-    if isinstance(problem.target, Curvature):  # no positions: the lattice is its own target
+    if isinstance(target, Curvature):  # no positions: the lattice is its own target
         target_points = shape.coarse_grain(folded)
-        fields = curvature_fit.curvature_target_fit(folded, problem.target)
+        fields = curvature_fit.curvature_target_fit(folded, target)
     else:
-        fields = design_fit(folded, target_points, problem.target)
-    curvature = curvature_fit.measured(folded, target_points, problem.target)
+        fields = design_fit(folded, target_points, target)
+    curvature = curvature_fit.measured(folded, target_points, target)
     fit = Fit(**fields, **curvature["errors"],
               min_side_over_mean=float(pattern.side_lengths.min()
                                        / pattern.side_lengths.mean()),
@@ -72,15 +99,15 @@ def result(problem: DesignProblem, nlp: transcription.NLP, start: Start, x: np.n
     require_finite({"the folded state": folded,
                     "the fit": [v for v in fit.to_dict().values() if v is not None]},
                    stats, x)
-    fit = replace(fit, **collision_fields(pattern, omega))
-    config = problem.config(options)
-    grid = (None if surfaces.rebuildable(config["target"])
-            else problem.target.sample(TARGET_GRID, TARGET_GRID))
-    return DesignResult(boundary=bd, omega=omega, pattern=pattern, folded=folded,
-                        target_points=target_points, rotation=R, translation=t,
-                        fit=fit, stats=stats, problem=config, x=x,
-                        curvature=curvature["maps"], target_grid=grid,
-                        notes=curvature["notes"])
+    return State(omega=omega, folded=folded, target_points=target_points, rotation=R,
+                 translation=t, fit=fit, curvature=curvature["maps"]), curvature["notes"]
+
+
+def target_grid(target: surfaces.Surface | Curvature, config: dict) -> np.ndarray | None:
+    """Samples of ``target`` kept in a result when its ``config`` cannot rebuild it
+    (:data:`TARGET_GRID` a side), else None."""
+    return (None if surfaces.rebuildable(config)
+            else target.sample(TARGET_GRID, TARGET_GRID))
 
 
 def check_constraints(problem: DesignProblem, pattern: Pattern, stats: SolveStats,

@@ -14,6 +14,7 @@ How it is solved is a :class:`~rffqm_nlp.design.options.SolveOptions`;
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from collections.abc import Sequence
 from typing import Any, Callable
 
 import numpy as np
@@ -26,7 +27,7 @@ from ..targets import shape, surfaces
 from ..targets.curvature_target import Curvature
 from . import transcription
 from .options import SolveOptions, transcription_of, with_overrides
-from .results import DesignResult
+from .results import MAX_STATES, DesignResult
 from .solve import solve
 
 PI = np.pi
@@ -55,6 +56,16 @@ DESIGN_KEYS = {
                                   for name in {**DEFAULT_WEIGHTS, **CURVATURE_WEIGHTS}}),
     "correspondence": Key("choice", choices=CORRESPONDENCES),
 }
+#: The options of each state of a problem of several targets (DesignProblem's ``omega`` and
+#: ``state_weights``; a design file's ``omega`` and ``weight`` in each [[target]] table).
+STATE_KEYS = {
+    "omega": Key("list", item=Key("number", low=-PI, high=PI, optional=True), least=2,
+                 most=MAX_STATES, hint="(one per target; None: designed)"),
+    "state_weights": Key("list", item=Key("number", low=0.0, low_open=True), least=2,
+                         most=MAX_STATES, hint="(one per target)"),
+}
+#: Fields of DesignProblem that no [design] key names: the target(s) and the states' options.
+NOT_DESIGN_KEYS = ("target", "other_targets", *STATE_KEYS)
 
 @dataclass(frozen=True)
 class Start:
@@ -75,7 +86,13 @@ class DesignProblem:
     ``target``: a surface (:mod:`rffqm_nlp.targets.surfaces`: a built-in, a Custom, a Mesh)
     whose lattice the coarse lattice should match, or a curvature field
     (:class:`~rffqm_nlp.targets.curvature_target.Curvature`) whose curvatures it should
-    have over a footprint of its size (docs/curvature_targets.md).
+    have over a footprint of its size (docs/curvature_targets.md); or a list of 2 to
+    :data:`~rffqm_nlp.design.results.MAX_STATES` of them: one sheet whose folded state at
+    omega_k fits target k, each state with its own alignment (docs/several_states.md).
+    ``targets`` holds them all, ``target`` then the first and ``other_targets`` the rest
+    (``target=[A, B]`` is ``target=A, other_targets=(B,)``). With several targets:
+    ``omega``, one per target, fixes omega_k where it is a number (None: designed), and
+    ``state_weights`` (default all 1) multiply each state's loss.
 
     Parameters (all with defaults chosen so designs are manufacturable):
 
@@ -130,14 +147,14 @@ class DesignProblem:
     fix: tuple[str, ...] = ()
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
     correspondence: str = "free"
+    omega: tuple[float | None, ...] | None = None
+    state_weights: tuple[float, ...] | None = None
+    other_targets: tuple[surfaces.Surface | Curvature, ...] = ()
 
     def __post_init__(self) -> None:
-        if not isinstance(self.target, (surfaces.Surface, Curvature)):
-            raise InputError("target must be a surface from rq.surfaces (get, Custom, Mesh, "
-                             "load) or a curvature field (rq.surfaces.Curvature), got "
-                             f"{describe_value(self.target)}")
+        self._check_targets()
         values = check_table({f.name: getattr(self, f.name) for f in fields(self)
-                              if f.name != "target"}, DESIGN_KEYS, "[design]")
+                              if f.name not in NOT_DESIGN_KEYS}, DESIGN_KEYS, "[design]")
         values["weights"] = self._weights_of(values["weights"])
         for name, value in values.items():
             object.__setattr__(self, name, value)
@@ -149,6 +166,67 @@ class DesignProblem:
             raise InputError(f"[design] omega_bounds and omega0 need omega_bounds[0] <= omega0 "
                              f"<= omega_bounds[1] with omega_bounds[0] < omega_bounds[1], got "
                              f"omega0 = {self.omega0:g}, omega_bounds = [{lo:g}, {hi:g}]")
+
+    def _check_targets(self) -> None:
+        """Set ``targets`` (and ``target``, the first) from the target or list of targets
+        given, and check the states' options (:data:`STATE_KEYS`)."""
+        given = self.target
+        listed = isinstance(given, Sequence) and not isinstance(given, (str, bytes))
+        if listed and self.other_targets:
+            raise InputError("give the targets either as target=[A, B, ...] or as target=A, "
+                             "other_targets=(B, ...), not both")
+        if not isinstance(self.other_targets, Sequence):
+            raise InputError(f"other_targets must be a list of targets, got "
+                             f"{describe_value(self.other_targets)}")
+        targets = tuple(given) if listed else (given, *self.other_targets)
+        several = len(targets) > 1
+        if listed and not 2 <= len(targets) <= MAX_STATES or len(targets) > MAX_STATES:
+            raise InputError(f"target must be one target or a list of 2 to {MAX_STATES} "
+                             f"targets (one per state), got a list of {len(targets)}")
+        for k, target in enumerate(targets):
+            if not isinstance(target, (surfaces.Surface, Curvature)):
+                where = f"target[{k}]" if several else "target"
+                raise InputError(f"{where} must be a surface from rq.surfaces (get, Custom, "
+                                 "Mesh, load) or a curvature field (rq.surfaces.Curvature), "
+                                 f"got {describe_value(target)}")
+        object.__setattr__(self, "target", targets[0])
+        object.__setattr__(self, "other_targets", targets[1:])
+        options = check_table({name: getattr(self, name) for name in STATE_KEYS
+                               if getattr(self, name) is not None}, STATE_KEYS, "DesignProblem")
+        for name, value in options.items():
+            if len(value) != len(targets):
+                raise InputError(f"{name} needs one entry per target ({len(targets)}), got "
+                                 f"{len(value)}" + ("" if several else
+                                                    "; a problem of one target fixes omega "
+                                                    "with omega0 and fix = ['omega']"))
+            object.__setattr__(self, name, value)
+
+    @property
+    def targets(self) -> tuple[surfaces.Surface | Curvature, ...]:
+        """Every target, one per state."""
+        return (self.target, *self.other_targets)
+
+    @property
+    def several(self) -> bool:
+        """Does the problem design one sheet for several targets?"""
+        return len(self.targets) > 1
+
+    def state_options(self, k: int) -> tuple[float | None, float]:
+        """(fixed omega or None, weight) of state k."""
+        omega = None if self.omega is None else self.omega[k]
+        return omega, 1.0 if self.state_weights is None else self.state_weights[k]
+
+    def weights_of(self, target: surfaces.Surface | Curvature,
+                   weights: dict[str, float] | None = None) -> dict[str, float]:
+        """The loss weights of a state whose target is ``target``: ``weights`` (default the
+        problem's), which are those of the first target's kind, where ``target`` is of that
+        kind (surface or curvature), else that kind's defaults with their regularization."""
+        weights = self.weights if weights is None else weights
+        curvature = isinstance(target, Curvature)
+        if curvature == isinstance(self.target, Curvature):
+            return weights
+        defaults = CURVATURE_WEIGHTS if curvature else DEFAULT_WEIGHTS
+        return {**defaults, "regularization": weights["regularization"]}
 
     def _weights_of(self, given: dict[str, float]) -> dict[str, float]:
         """The weights of this problem's target kind, missing ones 0: a surface's
@@ -211,7 +289,7 @@ class DesignProblem:
         with one on the same domain (:meth:`_initial_controls`).
         """
         start = start or self.start()
-        guess, corr = start, self._correspondence()
+        guess, corr = start, self.correspondence_of()
         controls = None
         if initial is not None:
             guess = self.carried(initial, start)
@@ -281,18 +359,21 @@ class DesignProblem:
             return None
         return controls
 
-    def _correspondence(self) -> transcription.Correspondence | None:
-        """The free correspondence from the uniform grid (None with "lattice", and for a
-        curvature target, which prescribes no positions)."""
-        if self.correspondence != "free" or isinstance(self.target, Curvature):
+    def correspondence_of(self, target: surfaces.Surface | Curvature | None = None
+                        ) -> transcription.Correspondence | None:
+        """The free correspondence from the uniform grid onto ``target`` (default the
+        problem's first); None with "lattice", and for a curvature target, which prescribes
+        no positions."""
+        target = self.target if target is None else target
+        if self.correspondence != "free" or isinstance(target, Curvature):
             return None
         return transcription.Correspondence.uniform(
-            self.target.casadi_function(), self.target.domain, (self.N + 1, self.M + 1))
+            target.casadi_function(), target.domain, (self.N + 1, self.M + 1))
 
     def grid(self, result: DesignResult) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid (U, V), each (N+1, M+1), of a free correspondence at ``result`` (a
         result of this problem, read from its design vector); None with "lattice"."""
-        corr = self._correspondence()
+        corr = self.correspondence_of()
         if corr is None:
             return None
         controls = transcription.controls_of(
@@ -350,10 +431,19 @@ class DesignProblem:
         """The problem as TOML-ready tables: {"target": ..., "design": ...}. A target that no
         table can name (a lambda, a closure, a Mesh made from arrays) is recorded as not
         rebuildable (:func:`rffqm_nlp.targets.surfaces.config_of`)."""
-        design = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "target"}
+        design = {f.name: getattr(self, f.name) for f in fields(self)
+                  if f.name not in NOT_DESIGN_KEYS}
         design.update(weights=dict(self.weights), panels=list(self.panels),
                       omega_bounds=list(self.omega_bounds), fix=list(self.fix))
-        return {"target": surfaces.config_of(self.target), "design": design}
+        if not self.several:
+            return {"target": surfaces.config_of(self.target), "design": design}
+        targets = []
+        for k, target in enumerate(self.targets):
+            omega, weight = self.state_options(k)
+            targets.append({**surfaces.config_of(target),
+                            **({} if omega is None else {"omega": omega}),
+                            **({} if weight == 1.0 else {"weight": weight})})
+        return {"target": targets, "design": design}
 
     def config(self, options: SolveOptions) -> dict[str, Any]:
         """{"target", "design", "solve"}: this problem solved with ``options``."""

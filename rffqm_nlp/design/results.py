@@ -28,7 +28,10 @@ if TYPE_CHECKING:  # plotly is imported by the view, on use
     import plotly.graph_objects
 
 FORMAT = "rffqm-nlp design result"
-VERSION = 2
+#: 3: a result may hold several states ("states"); a version 2 file is read as it is.
+VERSION = 3
+#: Most states of one sheet (DesignProblem's targets; a result's "states" and one more).
+MAX_STATES = 8
 FILENAME = "result.json"
 #: Keys of a version 1 result's "design" table that version 2 keeps in "solve".
 V1_SOLVE_KEYS = ("continuation", "transcription", "solver", "hessian", "damping", "max_iter",
@@ -251,6 +254,42 @@ class SolveStats:
 
 
 @dataclass(frozen=True)
+class State:
+    """One designed state of a sheet: its fold parameter ``omega``; ``folded`` (2N+1, 2M+1,
+    3), the vertices at ``omega`` moved rigidly onto its target (``rotation @ y +
+    translation``, ``rotation`` (3, 3), ``translation`` (3,)); its target lattice
+    ``target_points`` (N+1, M+1, 3); its :class:`Fit`; its ``curvature`` maps and
+    ``target_grid`` as :class:`DesignResult` defines them."""
+
+    omega: float
+    folded: np.ndarray
+    target_points: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    fit: Fit
+    curvature: Curvature | None = None
+    target_grid: np.ndarray | None = None
+
+    @property
+    def coarse(self) -> np.ndarray:
+        """The coarse-grained folded lattice r(i, j) = y^{(2i)(2j)}, aligned to the target."""
+        return coarse_grain(self.folded)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (``curvature`` and ``target_grid`` left out when None)."""
+        optional: dict[str, Any] = {}
+        if self.curvature is not None:
+            optional["curvature"] = self.curvature.to_dict()
+        if self.target_grid is not None:
+            optional["target_grid"] = np.asarray(self.target_grid).tolist()
+        return {"omega": self.omega, "folded": np.asarray(self.folded).tolist(),
+                "target_points": np.asarray(self.target_points).tolist(),
+                "rotation": np.asarray(self.rotation).tolist(),
+                "translation": np.asarray(self.translation).tolist(),
+                "fit": self.fit.to_dict(), **optional}
+
+
+@dataclass(frozen=True)
 class DesignResult:
     """A solved design.
 
@@ -270,7 +309,11 @@ class DesignResult:
       :func:`rffqm_nlp.targets.surfaces.config_of`), else None;
     * ``notes``: sentences on the design a reader should know, e.g. for a curvature target
       whether a surface realises the prescription and where the error sits
-      (:func:`rffqm_nlp.design.curvature_fit.curvature_notes`); () in a result saved before.
+      (:func:`rffqm_nlp.design.curvature_fit.curvature_notes`); () in a result saved before;
+    * ``other_states``: the states after the first of one sheet designed for several
+      targets (docs/several_states.md), each a :class:`State`; () for one target.
+      ``states`` holds every state, the first being the fields above (``omega``,
+      ``folded``, ``fit``, ...), which the files, pictures and makers of one state use.
 
     In a notebook a result shows its interactive view (:mod:`rffqm_nlp.show.view`).
     """
@@ -289,11 +332,21 @@ class DesignResult:
     curvature: Curvature | None = None
     target_grid: np.ndarray | None = None
     notes: tuple[str, ...] = ()
+    other_states: tuple[State, ...] = ()
 
     @property
     def coarse(self) -> np.ndarray:
         """The coarse-grained folded lattice r(i, j) = y^{(2i)(2j)}, aligned to the target."""
         return coarse_grain(self.folded)
+
+    @property
+    def states(self) -> tuple[State, ...]:
+        """Every designed state: the first (this result's own omega, folded, fit, ...),
+        then ``other_states``."""
+        first = State(omega=self.omega, folded=self.folded, target_points=self.target_points,
+                      rotation=self.rotation, translation=self.translation, fit=self.fit,
+                      curvature=self.curvature, target_grid=self.target_grid)
+        return (first, *self.other_states)
 
     def _repr_html_(self) -> str:
         """The interactive view in a notebook (:func:`rffqm_nlp.show.view.repr_html`)."""
@@ -310,21 +363,17 @@ class DesignResult:
         return figure(self, frames)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary of the whole result (``curvature`` and ``target_grid`` left
-        out when None, ``notes`` when empty)."""
+        """JSON-ready dictionary of the whole result: the first state's fields at the top
+        (``curvature`` and ``target_grid`` left out when None), ``notes`` when there are
+        any, ``states`` (the other states, :meth:`State.to_dict`) when there are any."""
         optional: dict[str, Any] = {"notes": list(self.notes)} if self.notes else {}
-        if self.curvature is not None:
-            optional["curvature"] = self.curvature.to_dict()
-        if self.target_grid is not None:
-            optional["target_grid"] = np.asarray(self.target_grid).tolist()
+        if self.other_states:
+            optional["states"] = [state.to_dict() for state in self.other_states]
         return {
             "format": FORMAT, "version": VERSION,
-            "boundary": self.boundary.to_dict(), "omega": self.omega,
-            "pattern": self.pattern.to_dict(), "folded": self.folded.tolist(),
-            "target_points": self.target_points.tolist(), "rotation": self.rotation.tolist(),
-            "translation": self.translation.tolist(), "fit": self.fit.to_dict(),
-            "stats": self.stats.to_dict(), "problem": jsonable(self.problem),
-            "x": np.asarray(self.x).tolist(), **optional,
+            "boundary": self.boundary.to_dict(), **self.states[0].to_dict(),
+            "pattern": self.pattern.to_dict(), "stats": self.stats.to_dict(),
+            "problem": jsonable(self.problem), "x": np.asarray(self.x).tolist(), **optional,
         }
 
     @classmethod
@@ -343,12 +392,14 @@ class DesignResult:
             check_numbers(d, source)
             if d.get("version") == 1:
                 d = migrate_v1(d)
+            if d.get("version") == 2:     # version 3 added "states", which it has none of
+                d = {**d, "version": VERSION}
             if d.get("version") != VERSION:
                 version = d.get("version")
                 shown = (version if isinstance(version, int) and not isinstance(version, bool)
                          and abs(version) < 10**6 else describe_value(version))
                 raise InputError(f"{source}: design result version {shown} is not supported "
-                                 f"(this rffqm-nlp reads versions 1 and {VERSION})")
+                                 f"(this rffqm-nlp reads versions 1 to {VERSION})")
             return _checked(d, source)
         except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
             if isinstance(exc, RffqmError):
@@ -376,25 +427,32 @@ class DesignResult:
 
 
 def target_mesh(result: DesignResult, target: surfaces.Surface | None = None,
-                trust: bool = False, n: int = TARGET_MESH) -> trimesh.Trimesh:
-    """The target as a triangle mesh in the target frame (that of ``result.folded``), for
-    pictures: ``target`` when given, else the kept ``result.target_grid`` (two triangles per
-    cell), else the surface rebuilt from ``result.problem["target"]`` (code that it names
-    is run only with ``trust``). A :class:`~rffqm_nlp.targets.meshes.Mesh` made from a triangle
-    mesh gives those triangles, any other surface its n x n sample (:meth:`Surface.mesh`).
+                trust: bool = False, n: int = TARGET_MESH, state: int = 0) -> trimesh.Trimesh:
+    """The target of ``result.states[state]`` as a triangle mesh in that state's target
+    frame (that of its ``folded``), for pictures: ``target`` when given, else the state's
+    kept ``target_grid`` (two triangles per cell), else the surface rebuilt from
+    ``result.problem["target"]`` (of a design of several states: its entry ``state``; code
+    that it names is run only with ``trust``). A :class:`~rffqm_nlp.targets.meshes.Mesh`
+    made from a triangle mesh gives those triangles, any other surface its n x n sample
+    (:meth:`Surface.mesh`).
 
-    Raises :class:`RffqmError` (one line) when the target cannot be rebuilt; draw
-    ``result.target_points`` then.
+    Raises :class:`RffqmError` (one line) when the target cannot be rebuilt; draw the
+    state's ``target_points`` then.
     """
-    if target is None and result.target_grid is not None:
-        grid = np.asarray(result.target_grid, dtype=float)
+    kept = result.target_grid if state == 0 else result.states[state].target_grid
+    if target is None and kept is not None:
+        grid = np.asarray(kept, dtype=float)
         return trimesh.Trimesh(vertices=grid.reshape(-1, 3),
                                faces=surfaces.grid_faces(*grid.shape[:2]), process=False)
     if target is None:
         if not isinstance(result.problem, dict) or "target" not in result.problem:
             raise InputError("the result's problem has no [target] table to rebuild the "
                              "target from")
-        target = surfaces.from_config(result.problem["target"], trust=trust)
+        table = result.problem["target"]
+        if isinstance(table, list):  # several states: the state's own keys are not its target's
+            table = {key: value for key, value in table[state].items()
+                     if key not in ("omega", "weight")}
+        target = surfaces.from_config(table, trust=trust)
     if isinstance(target, surfaces.Mesh) and target.mesh is not None:
         return target.mesh.copy()  # the shape itself, not its spline
     return surfaces.Surface.mesh(target, n, n)
@@ -410,14 +468,45 @@ def migrate_v1(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def _checked(d: dict[str, Any], source: str) -> DesignResult:
-    """The result of a version 2 dict, every array checked (see DesignResult.from_dict)."""
-    arrays = {key: finite(d, key, source) for key in
-              ("omega", "folded", "target_points", "rotation", "translation", "x")}
+    """The result of a version 3 dict, every array checked (see DesignResult.from_dict)."""
     for key in ("left", "bottom", "l_left", "l_bottom"):
         finite(required(d, "boundary", source), key, source, f"boundary.{key}")
     with named(source, "boundary"):
         bd = BoundaryData.from_dict(d["boundary"])
-    N, M = bd.N, bd.M
+    x = finite(d, "x", source)
+    if x.ndim != 1:
+        raise InputError(f"{source}: x must be a flat list of numbers, got shape {x.shape}")
+    pattern = checked_pattern(required(d, "pattern", source), source, boundary=bd)
+    first = _checked_state(d, source, pattern)
+    others = d.get("states", [])
+    if not isinstance(others, list) or len(others) > MAX_STATES - 1:
+        raise InputError(f"{source}: states must be a list of at most {MAX_STATES - 1} "
+                         f"states, got {describe_value(others)}")
+    states = tuple(_checked_state(state, f"{source}: states[{k}]", pattern)
+                   for k, state in enumerate(others))
+    with named(source):
+        stats = SolveStats.from_dict(required(d, "stats", source))
+    problem = required(d, "problem", source)
+    if not isinstance(problem, dict):
+        raise InputError(f"{source}: problem must be a table, got {describe_value(problem)}")
+    return DesignResult(
+        boundary=bd, omega=first.omega, pattern=pattern, folded=first.folded,
+        target_points=first.target_points, rotation=first.rotation,
+        translation=first.translation, fit=first.fit, stats=stats, problem=dict(problem),
+        x=x, curvature=first.curvature, target_grid=first.target_grid,
+        notes=check_value(d.get("notes", ()), NOTES_KEY, f"{source}: notes"),
+        other_states=states)
+
+
+def _checked_state(d: Any, source: str, pattern: Pattern) -> State:
+    """One state of a result (the top of its dict, or an entry of its "states"), every
+    array checked against ``pattern``: shapes, omega in [-pi, pi], a proper rotation, the
+    folded state the pattern folded at omega and moved, the fit key by key."""
+    if not isinstance(d, dict):
+        raise InputError(f"{source} must be a table, got {describe_value(d)}")
+    arrays = {key: finite(d, key, source) for key in
+              ("omega", "folded", "target_points", "rotation", "translation")}
+    N, M = pattern.N, pattern.M
     shapes = {"omega": (), "folded": (N + 1, M + 1, 3),
               "target_points": (N // 2 + 1, M // 2 + 1, 3), "rotation": (3, 3),
               "translation": (3,)}
@@ -425,10 +514,6 @@ def _checked(d: dict[str, Any], source: str) -> DesignResult:
         if arrays[key].shape != expected:
             raise InputError(f"{source}: {key} has shape {arrays[key].shape}, expected "
                              f"{expected} for the boundary's {N} x {M} panels")
-    if arrays["x"].ndim != 1:
-        raise InputError(f"{source}: x must be a flat list of numbers, got shape "
-                         f"{arrays['x'].shape}")
-    pattern = checked_pattern(required(d, "pattern", source), source, boundary=bd)
     with named(source):
         omega = float(check_omega(arrays["omega"]))
     rotation = arrays["rotation"]
@@ -439,14 +524,7 @@ def _checked(d: dict[str, Any], source: str) -> DesignResult:
            "and moved by the stored rotation and translation")
     with named(source):
         fit = Fit.from_dict(required(d, "fit", source))
-        stats = SolveStats.from_dict(required(d, "stats", source))
-    problem = required(d, "problem", source)
-    if not isinstance(problem, dict):
-        raise InputError(f"{source}: problem must be a table, got {describe_value(problem)}")
-    return DesignResult(
-        boundary=bd, omega=omega, pattern=pattern, folded=arrays["folded"],
-        target_points=arrays["target_points"], rotation=rotation,
-        translation=arrays["translation"], fit=fit, stats=stats, problem=dict(problem),
-        x=arrays["x"], curvature=stored_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
-        target_grid=stored_target_grid(d, source),
-        notes=check_value(d.get("notes", ()), NOTES_KEY, f"{source}: notes"))
+    return State(omega=omega, folded=arrays["folded"], target_points=arrays["target_points"],
+                 rotation=rotation, translation=arrays["translation"], fit=fit,
+                 curvature=stored_curvature(d, source, (N // 2 - 1, M // 2 - 1)),
+                 target_grid=stored_target_grid(d, source))

@@ -4,21 +4,26 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..files import Key, check_table, read_toml
+from ..files import Key, check_table, describe_value, read_toml
 from ..targets import surfaces
 from ..targets.meshes import is_mesh_file
 from .options import SOLVE_KEYS, SolveOptions
 from .problem import DESIGN_KEYS, DesignProblem
+from .results import MAX_STATES
 
 #: The tables of a design file.
 TABLES = ("target", "design", "solve")
 #: The tables of a design file as :func:`rffqm_nlp.files.check_table` checks them.
 FILE_KEYS = {name: Key("table") for name in TABLES}
+#: The keys of a state's own in a [[target]] table of a design of several states.
+STATE_TABLE_KEYS = {"omega": Key("number", low=-math.pi, high=math.pi),
+                    "weight": Key("number", low=0.0, low_open=True)}
 
 
 def from_config(config: dict[str, Any], root: str | Path | None = None,
@@ -26,13 +31,17 @@ def from_config(config: dict[str, Any], root: str | Path | None = None,
     """The problem and the options of {"target": ..., "design": ..., "solve": ...} (the
     tables of a design file; [design] and [solve] may be missing). An unknown table or key
     is refused with the closest known name, a solve option in [design] with where it goes.
+    Several [[target]] tables (a list) design one sheet for several states, each table
+    with its state's optional ``omega`` (fixed) and ``weight`` (:func:`state_tables`).
 
     ``root``: the folder that a target's ``python = "file.py:function"`` is relative to
     (default: the current folder); ``trust``: run the code a target names
     (:func:`rffqm_nlp.targets.surfaces.from_config`), refused without it.
     """
-    tables = check_table(config, FILE_KEYS, "")
-    if "target" not in tables:
+    listed = isinstance(config, dict) and isinstance(config.get("target"), list)
+    tables = check_table({k: v for k, v in config.items() if k != "target"} if listed
+                         else config, FILE_KEYS, "")
+    if "target" not in tables and not listed:
         raise InputError("a design needs a [target] table (name = \"<surface>\" and its "
                          "parameters, or python = \"file.py:function\" and domain)")
     design = tables.get("design", {})
@@ -41,8 +50,35 @@ def from_config(config: dict[str, Any], root: str | Path | None = None,
             raise InputError(f"[design] {key} is a solve option: move it to the [solve] table")
     design = check_table(design, DESIGN_KEYS, "[design]")
     options = SolveOptions.from_config(tables.get("solve", {}), trust)
-    target = surfaces.from_config(tables["target"], root=root, trust=trust)
-    return DesignProblem(target=target, **design), options
+    if not listed:
+        target = surfaces.from_config(tables["target"], root=root, trust=trust)
+        return DesignProblem(target=target, **design), options
+    states = state_tables(config["target"])
+    targets = [surfaces.from_config(table, root=root, trust=trust) for table, _, _ in states]
+    omegas = [omega for _, omega, _ in states]
+    weights = [weight for _, _, weight in states]
+    return DesignProblem(target=targets,
+                         omega=None if all(w is None for w in omegas) else omegas,
+                         state_weights=None if all(w == 1.0 for w in weights) else weights,
+                         **design), options
+
+
+def state_tables(tables: list[Any]) -> list[tuple[dict[str, Any], float | None, float]]:
+    """The [[target]] tables of a design of several states, each as (its target's table,
+    its fixed omega or None, its weight): ``omega`` and ``weight`` are the state's keys
+    (:data:`STATE_TABLE_KEYS`), the rest its target's."""
+    if not 2 <= len(tables) <= MAX_STATES:
+        raise InputError(f"[[target]] must be given 2 to {MAX_STATES} times (one per state), "
+                         f"got {len(tables)}")
+    out = []
+    for k, table in enumerate(tables):
+        if not isinstance(table, dict):
+            raise InputError(f"[[target]] {k + 1} must be a table, got {describe_value(table)}")
+        own = {key: table[key] for key in STATE_TABLE_KEYS if key in table}
+        state = check_table(own, STATE_TABLE_KEYS, f"state {k + 1} [[target]]")
+        out.append(({key: v for key, v in table.items() if key not in STATE_TABLE_KEYS},
+                    state.get("omega"), state.get("weight", 1.0)))
+    return out
 
 
 def load_design(path: str | Path, trust: bool = False) -> tuple[DesignProblem, SolveOptions]:

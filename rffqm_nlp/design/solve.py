@@ -18,17 +18,17 @@ import casadi as ca
 import numpy as np
 
 from .. import memory
-from ..errors import InfeasibleDesign, InputError, SolverFailed, raise_for_ipopt
+from ..errors import InfeasibleDesign, InputError, SolverFailed
 from ..targets import shape
 from ..targets.curvature_target import Curvature
-from . import clearance, measure, transcription
+from . import clearance, measure, several, transcription
 from .multistart import solve_multistart
 from .options import CLOSED_FORM, LM, SolveOptions
 from .results import DesignResult, SolveStats
 from .solvers import ipopt, levenberg_marquardt
 from .solvers.closed_form import closed_form_start
 from .solvers.closed_form.prescribed import prescribed_start
-from .solvers.context import Outcome, Run
+from .solvers.context import Outcome, Run, raise_failure
 
 if TYPE_CHECKING:  # for type hints only: the problem calls this module
     from .problem import DesignProblem, Start
@@ -42,6 +42,9 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
     if isinstance(problem.target, Curvature) and options.stop_rms is not None:
         raise InputError("[solve] stop_rms is a distance to the target lattice, which a "
                          "curvature target does not have; leave it out")
+    if problem.several:
+        several.refuse_options(problem, options, warm_start)
+        return several.solve_states(problem, options, callback=callback, verbose=verbose)
     if options.solver == CLOSED_FORM:
         return closed_form_result(problem, options)
     if options.multistart != 1:
@@ -65,7 +68,7 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
             break
     stats = run.stats(outcome)
     if not outcome.success:
-        _raise_failure(nlp, outcome, stats, run.iterations)
+        raise_failure(nlp, outcome, stats, run.iterations)
     if problem.min_clearance > 0:
         nlp, outcome = _keep_clearance(problem, nlp, start, run, outcome)
         stats = run.stats(outcome)
@@ -203,23 +206,6 @@ def fit_reached(problem: DesignProblem, nlp: transcription.NLP, start: Start,
     return reached
 
 
-def _raise_failure(nlp: transcription.NLP, outcome: Outcome, stats: SolveStats,
-                   iterations: int) -> None:
-    """The named error of an unsuccessful solve."""
-    if outcome.g is None:
-        raise SolverFailed(
-            f"the marched Levenberg-Marquardt solve did not finish the design: status "
-            f"{outcome.status} after {iterations} iterations; raise max_iter or time_limit",
-            status=outcome.status, stats=stats, last_iterate=outcome.x,
-            best_iterate=outcome.best)
-    viol = np.maximum(nlp.lbg - outcome.g, outcome.g - nlp.ubg)
-    report = f"largest constraint violation {viol.max():.3g} at constraint {int(viol.argmax())}"
-    raise_for_ipopt(
-        outcome.status, iterations, "the design",
-        f"{report}; relax min_length, min_angle or mu_margin",
-        "raise max_iter or time_limit, or relax tol", stats, outcome.x, outcome.best)
-
-
 def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None) -> int:
     """Bytes that solving ``problem`` with ``options`` needs at its peak
     (:func:`rffqm_nlp.memory.design_estimate`; a multistart solves one start at a time).
@@ -229,9 +215,14 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     + min(k, Q / 2)) coordinates (a run that does not reach stop_rms in the coarse basis
     goes on in the whole design: then n_d's memory), plus a free correspondence's 2 Ku Kv
     controls (at most 2 GRID_CONTROLS^2,
-    :class:`rffqm_nlp.design.transcription.Correspondence`)."""
+    :class:`rffqm_nlp.design.transcription.Correspondence`). A design of several targets
+    (IPOPT on the simultaneous NLP of every state, :mod:`rffqm_nlp.design.several`)
+    counts one simultaneous NLP per target."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
+    if problem.several:  # IPOPT on the simultaneous NLP, one state's kinematics per target
+        need = len(problem.targets) * memory.design_estimate(problem.panels, "simultaneous")
+        return int(min(need, 2.0 ** 62))
     if options.solver != LM:
         need = memory.design_estimate(problem.panels, options.transcription)
         return int(min(need, 2.0 ** 62))

@@ -15,8 +15,10 @@ from typing import Callable
 
 import numpy as np
 
+from ...errors import SolverFailed, raise_for_ipopt
 from ..options import SolveOptions
 from ..results import SolveStats
+from ..transcription import NLP
 
 
 @dataclass
@@ -93,3 +95,20 @@ class Outcome:
     best: np.ndarray | None
     multipliers: dict[str, np.ndarray] | None = None
     g: np.ndarray | None = None
+
+
+def raise_failure(nlp: NLP, outcome: Outcome, stats: SolveStats, iterations: int) -> None:
+    """Raise the named error of an unsuccessful solve (:class:`SolverFailed`, or IPOPT's
+    statuses as :func:`rffqm_nlp.errors.raise_for_ipopt` names them)."""
+    if outcome.g is None:
+        raise SolverFailed(
+            f"the marched Levenberg-Marquardt solve did not finish the design: status "
+            f"{outcome.status} after {iterations} iterations; raise max_iter or time_limit",
+            status=outcome.status, stats=stats, last_iterate=outcome.x,
+            best_iterate=outcome.best)
+    viol = np.maximum(nlp.lbg - outcome.g, outcome.g - nlp.ubg)
+    report = f"largest constraint violation {viol.max():.3g} at constraint {int(viol.argmax())}"
+    raise_for_ipopt(
+        outcome.status, iterations, "the design",
+        f"{report}; relax min_length, min_angle or mu_margin",
+        "raise max_iter or time_limit, or relax tol", stats, outcome.x, outcome.best)

@@ -10,7 +10,9 @@ A transcription turns the declarative problem (:class:`Setup`, :mod:`.inputs`) i
   sparse Jacobians). Its lifted variables keep every row local (:mod:`.lifting`), and it
   carries the Jacobians of its residuals and constraints assembled from local stencils
   (:mod:`.stencil_jacobians`), which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
-  uses instead of CasADi's Jacobians of the whole graph.
+  uses instead of CasADi's Jacobians of the whole graph;
+* :func:`several_states` (:mod:`.states_nlp`): one crease pattern of the simultaneous
+  transcription folded into several states, each with its own omega, alignment and target.
 
 Both share the residuals of the loss and the Tikhonov terms (:mod:`.loss`; a curvature
 target's loss: :mod:`.curvature_loss`), the inline
@@ -27,9 +29,10 @@ from .loss import loss_residuals, rotation_from_quaternion, smoothness_residuals
 from .nlp import NLP, controls_of
 from .sequential_nlp import sequential
 from .simultaneous_nlp import simultaneous
+from .states_nlp import several_states
 
 __all__ = ["GRID_CONTROLS", "GRID_REGULARIZATION", "MIN_GRID_STEP", "NLP", "Correspondence",
            "CurvatureLoss",
            "Setup", "controls_of", "damping_weights", "loss_residuals",
            "quaternion_from_rotation", "rotation_from_quaternion", "sequential",
-           "simultaneous", "smoothness_residuals"]
+           "several_states", "simultaneous", "smoothness_residuals"]

@@ -69,13 +69,20 @@ def objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.M
     :func:`.curvature_loss.curvature_residuals`), then the rows on the design alone
     (:func:`design_residuals`). ``grid``: the controls (Cu, Cv) of a free correspondence
     (the target lattice at their grid, and their Tikhonov term), or None."""
+    return ca.vertcat(state_residuals(setup, r, rigid, grid),
+                      design_residuals(setup, rigid, boundary_vec, grid))
+
+
+def state_residuals(setup: Setup, r, rigid, grid=None) -> ca.MX:
+    """The loss of one folded state's coarse lattice r against its target: a curvature
+    target's :func:`.curvature_loss.curvature_residuals`, else :func:`loss_residuals`
+    after the alignment ``rigid`` (q, t) (7,), against the target lattice at the controls
+    ``grid`` (Cu, Cv) of a free correspondence, or the fixed one with None."""
     if setup.curvature is not None:
-        loss = curvature_residuals(r, setup.curvature)
-    else:
-        target = setup.target if grid is None else setup.correspondence.lattice(*grid)
-        loss = loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
-                              setup.weights, setup.spacing)
-    return ca.vertcat(loss, design_residuals(setup, rigid, boundary_vec, grid))
+        return curvature_residuals(r, setup.curvature)
+    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+    return loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
+                          setup.weights, setup.spacing)
 
 
 def design_residuals(setup: Setup, rigid, boundary_vec, grid=None):

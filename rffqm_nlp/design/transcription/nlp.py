@@ -69,6 +69,10 @@ class NLP:
     #: Jacobians of the whole graph
     r_jacobian: stencils.LocalJacobian | stencils.LiftedJacobian | None = None
     g_jacobian: stencils.LocalJacobian | None = None
+    #: every folded state of an NLP of several states of one sheet
+    #: (:func:`.states_nlp.several_states`), the first also ``unpack``'s omega, ``folded``
+    #: and ``free_target``; () for one state
+    states: tuple[StateFunctions, ...] = ()
 
     @property
     def objective(self) -> ca.MX:
@@ -100,6 +104,32 @@ class NLP:
         return replace(self, g=ca.vertcat(self.g, rows), g_jacobian=jacobian,
                        lbg=np.concatenate([self.lbg, np.asarray(lower, dtype=float)]),
                        ubg=np.concatenate([self.ubg, np.asarray(upper, dtype=float)]))
+
+
+@dataclass(frozen=True)
+class StateFunctions:
+    """One folded state of an NLP of several states: Functions of x giving its ``omega``
+    (1 x 1), its folded vertices ``folded`` (Yx, Yy, Yz) and, with a free correspondence,
+    its target lattice ``target`` (Tx, Ty, Tz) (None: the target lattice is fixed)."""
+
+    omega: ca.Function
+    folded: ca.Function
+    target: ca.Function | None = None
+
+    def omega_value(self, x: np.ndarray) -> float:
+        """omega at the design vector ``x``."""
+        return float(self.omega(x))
+
+    def folded_array(self, x: np.ndarray) -> np.ndarray:
+        """The folded vertices at ``x``, (2N+1, 2M+1, 3)."""
+        return np.stack([c.full() for c in self.folded(x)], axis=-1)
+
+    def target_array(self, x: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+        """The target lattice at ``x`` (N+1, M+1, 3): ``fixed`` unless the correspondence
+        is free."""
+        if self.target is None:
+            return fixed
+        return np.stack([c.full() for c in self.target(x)], axis=-1)
 
 
 class Layout:

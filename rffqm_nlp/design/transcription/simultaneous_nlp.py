@@ -1,9 +1,11 @@
 """The simultaneous transcription (:func:`simultaneous`): every vertex angle and side is a
 variable and the marching equations are equality constraints, panel by panel (many
 variables, sparse Jacobians); and its projection of any point onto the marched designs
-(:class:`_Projection`)."""
+(:class:`Projection`)."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -11,10 +13,11 @@ import numpy as np
 from ...errors import InputError
 from ...model import numpy_model
 from ...model import vertex as vx
+from ...model.pattern import Pattern
 from ...model.marching import (Evaluation, locate_failure, marched_function, panel_cell, qmul,
                                rotated_edges)
 from ...targets import shape
-from .correspondence import with_grid_rows
+from .correspondence import Correspondence, with_grid_rows
 from .inputs import Setup, damping_weights
 from .lifting import (MeanTree, crease_quaternion_signs, fold_multipliers_kv,
                       local_crease_quaternions, sides_by_antidiagonal)
@@ -55,65 +58,27 @@ def simultaneous(setup: Setup) -> NLP:
     n1, m1 = N + 1, M + 1
     tree = MeanTree(n1 * M + N * m1, order=sides_by_antidiagonal(N, M))
     corr = setup.correspondence
-    grid_blocks = {} if corr is None else {"U": corr.shape, "V": corr.shape}
-    lay = Layout({"A": (n1, m1), "B": (n1, m1), "LH": (n1, M), "LV": (N, m1),
-                  "TH": (n1, m1), "Qw": (N, M), "Qx": (N, M), "Qy": (N, M), "Qz": (N, M),
-                  "Yx": (n1, m1), "Yy": (n1, m1), "Yz": (n1, m1), "PHI": (N - 1, M),
-                  "P": (tree.size, 1), **grid_blocks, "omega": (1, 1), "rigid": (7, 1)})
+    lay = layout(N, M, tree, corr)
     parts = (ca.MX.sym("x", lay.size - 8), ca.MX.sym("x_global", 8))  # omega, rigid
     x = ca.vertcat(*parts)
     v = lay.views(x)
-    A, B, LH, LV, TH, omega = v["A"], v["B"], v["LH"], v["LV"], v["TH"], v["omega"]
     start = numpy_model.march(bd0)
-    S = ca.DM(start.sigma)
-    # Pattern: one panel cell per panel, mapped.
-    cell = panel_cell().map(N * M)
-    row = lambda m: ca.vec(m).T  # noqa: E731 - column-major row of a panel-shaped block
-    xs, ys = cell(ca.vertcat(row(A[1:, :M]), row(B[1:, :M]), row(S[1:, :M]), row(LV[:, :M])),
-                  ca.vertcat(row(A[:N, :M]), row(B[:N, :M]), row(S[:N, :M]),
-                             row(A[:N, 1:]), row(B[:N, 1:]), row(S[:N, 1:]), row(LH[:N, :])))
-    # The sides of d without the quotient (vertex.panel_side_residuals), with the roles of
-    # the panel cell: a = (i, j), b = (i+1, j), c = (i, j+1).
-    sides_res = vx.panel_side_residuals(A[:N, :M], PI - B[1:, :M], B[:N, 1:], LV[:, :M],
-                                        LH[:N, :], LV[:, 1:], LH[1:, :])
-    march_res = ca.vec(ca.vertcat(row(A[1:, 1:]) - xs[0, :], row(B[1:, 1:]) - xs[1, :],
-                                  *(row(r) for r in sides_res)))
-    mu = ys[1, :].T
-    # Kinematics, lifted.
-    th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
-                        ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
-    quat = [v["Qw"], v["Qx"], v["Qy"], v["Qz"]]
-    qv, qh, phi_res = local_crease_quaternions(A, B, start.sigma, TH, omega, v["PHI"])
-    prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
-    prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
-    q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
-                       *(ca.vec(c[1:, :] - p) for c, p in zip(quat, prod_rows)))
-    Y = [v["Yx"], v["Yy"], v["Yz"]]
-    bottom, vertical = rotated_edges(quat, A, TH, LH, LV)
-    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :M] - b) for c, b in zip(Y, bottom)),
-                       *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
-    # Boundary design vector in BoundaryData.to_vector order.
-    bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T, omega)
+    pattern = pattern_rows(setup, v, start, tree)
+    phi_res, q_res, y_res, Y = fold_rows(v, start.sigma, v)
+    bvec = ca.vertcat(pattern.boundary, v["omega"])
     grid = None if corr is None else (v["U"], v["V"])
     res = objective_residuals(setup, shape.coarse_grain(Y), v["rigid"], bvec, grid)
-    sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
-    mean_res, mean = tree.residuals(sides, v["P"])
-    sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
-    n_eq = (march_res.numel() + th_res.numel() + phi_res.numel() + q_res.numel()
-            + y_res.numel() + mean_res.numel())
-    nv = N + 1 + M
-    mv, lo_mv, hi_mv = setup.boundary_mv(bvec[:nv], bvec[nv:2 * nv])
-    g = ca.vertcat(march_res, th_res, phi_res, q_res, y_res, mean_res,
-                   sign * (mu ** 2 - 1), mv, sides - setup.min_length * mean)
-    lo_mu, hi_mu = setup.mu_bounds()
-    lbg = np.concatenate([np.zeros(n_eq), lo_mu, lo_mv, np.zeros(sides.numel())])
-    ubg = np.concatenate([np.zeros(n_eq), hi_mu, hi_mv, np.full(sides.numel(), np.inf)])
+    g = ca.vertcat(pattern.march, pattern.edges, phi_res, q_res, y_res, pattern.mean,
+                   pattern.inequalities)
+    n_eq = g.numel() - pattern.inequalities.numel()
+    lbg = np.concatenate([np.zeros(n_eq), pattern.lower])
+    ubg = np.concatenate([np.zeros(n_eq), pattern.upper])
     if corr is not None:
         g, lbg, ubg = with_grid_rows(corr, grid, g, lbg, ubg)
     block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
                                            for n in names])
     grid_index = block("U", "V") if corr is not None else np.zeros(0, dtype=np.int64)
-    project = _Projection(x, v, lay, start.sigma, tree, grid_index)
+    project = Projection(x, v, lay, start.sigma, tree, grid_index)
     x0 = project(lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
                            "omega": setup.omega, "rigid": setup.rigid0()}))
     if x0 is None:
@@ -138,7 +103,7 @@ def simultaneous(setup: Setup) -> NLP:
               "omega": lay.index("omega", 0, 0)}
     for name in setup.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
-    unpack = ca.Function("unpack", [x], [bvec[:-1], omega])
+    unpack = ca.Function("unpack", [x], [pattern.boundary, v["omega"]])
     folded = ca.Function("folded", [x], Y)
     position = np.full(lay.size, np.nan)
     for name in ("A", "B"):
@@ -174,7 +139,129 @@ def simultaneous(setup: Setup) -> NLP:
 
 
 
-class _Projection:
+def layout(N: int, M: int, tree: MeanTree, corr: Correspondence | None) -> Layout:
+    """The variables of :func:`simultaneous` for an N x M-panel pattern: the pattern's
+    blocks but the mean tree's (:func:`pattern_blocks`), the state's kinematics, the mean
+    tree's nodes P, a free correspondence's controls U, V (:func:`state_blocks`), then the
+    global variables omega and the alignment ``rigid`` (q, t)."""
+    blocks, state = pattern_blocks(N, M, tree), state_blocks(N, M, corr)
+    nodes = {"P": blocks.pop("P")}
+    grid = {name: state.pop(name) for name in ("U", "V") if name in state}
+    return Layout({**blocks, **state, **nodes, **grid, "omega": (1, 1), "rigid": (7, 1)})
+
+
+def marched_blocks(setup: Setup, tree: MeanTree) -> dict[str, np.ndarray]:
+    """The blocks of :func:`layout` at ``setup``'s start (its boundary data, omega,
+    alignment and controls), marched and folded (:class:`Projection`), by name, each
+    flat in column-major order. Raises RuntimeError when the start does not march."""
+    bd0, corr = setup.boundary, setup.correspondence
+    lay = layout(bd0.N, bd0.M, tree, corr)
+    x = ca.MX.sym("x", lay.size)
+    grid = (np.concatenate([np.arange(lay.size)[lay.slices[n]] for n in ("U", "V")])
+            if corr is not None else np.zeros(0, dtype=np.int64))
+    start = numpy_model.march(bd0)
+    point = Projection(x, lay.views(x), lay, start.sigma, tree, grid)(lay.pack(
+        {"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
+         "omega": setup.omega, "rigid": setup.rigid0(),
+         **({} if corr is None else dict(zip(("U", "V"), corr.views(setup.controls0()))))}))
+    if point is None:
+        raise RuntimeError("the start does not march with the CasADi graph")
+    return {name: point[lay.slices[name]] for name in lay.shapes}
+
+
+def pattern_blocks(N: int, M: int, tree: MeanTree) -> dict[str, tuple[int, int]]:
+    """The simultaneous NLP's blocks of the crease pattern of an N x M-panel pattern: the
+    vertex angles A, B, the sides LH, LV, the edge directions TH and the mean tree's nodes
+    P, with their shapes (:class:`Layout`)."""
+    return {"A": (N + 1, M + 1), "B": (N + 1, M + 1), "LH": (N + 1, M), "LV": (N, M + 1),
+            "TH": (N + 1, M + 1), "P": (tree.size, 1)}
+
+
+def state_blocks(N: int, M: int, corr: Correspondence | None) -> dict[str, tuple[int, int]]:
+    """The blocks of one folded state of an N x M-panel pattern: the panel quaternions
+    Q*, the folded vertices Y*, the fold multiplier angles PHI, and a free
+    correspondence's controls U, V."""
+    quaternions = {name: (N, M) for name in ("Qw", "Qx", "Qy", "Qz")}
+    vertices = {name: (N + 1, M + 1) for name in ("Yx", "Yy", "Yz")}
+    grid = {} if corr is None else {"U": corr.shape, "V": corr.shape}
+    return {**quaternions, **vertices, "PHI": (N - 1, M), **grid}
+
+
+@dataclass(frozen=True)
+class PatternRows:
+    """The rows of the simultaneous NLP on the crease pattern alone, whatever its folded
+    states (:func:`pattern_rows`): the marching equations of the panel cells (``march``),
+    of the edge directions (``edges``) and of the mean tree (``mean``); the inequalities
+    (multiplier margins, boundary MV, sides against the mean side) with their bounds; the
+    boundary data vector in :meth:`BoundaryData.to_vector` order (``boundary``)."""
+
+    march: ca.MX
+    edges: ca.MX
+    mean: ca.MX
+    inequalities: ca.MX
+    lower: np.ndarray
+    upper: np.ndarray
+    boundary: ca.MX
+
+
+def pattern_rows(setup: Setup, v: dict, start: Pattern, tree: MeanTree) -> PatternRows:
+    """The crease pattern's rows of the simultaneous NLP from the views ``v`` of its blocks
+    A, B, LH, LV, TH and P (:class:`Layout`); ``start``: the pattern the start marches to
+    (its signs sigma are held)."""
+    A, B, LH, LV, TH = v["A"], v["B"], v["LH"], v["LV"], v["TH"]
+    N, M = start.sigma.shape[0] - 1, start.sigma.shape[1] - 1
+    S = ca.DM(start.sigma)
+    # Pattern: one panel cell per panel, mapped.
+    cell = panel_cell().map(N * M)
+    row = lambda m: ca.vec(m).T  # noqa: E731 - column-major row of a panel-shaped block
+    xs, ys = cell(ca.vertcat(row(A[1:, :M]), row(B[1:, :M]), row(S[1:, :M]), row(LV[:, :M])),
+                  ca.vertcat(row(A[:N, :M]), row(B[:N, :M]), row(S[:N, :M]),
+                             row(A[:N, 1:]), row(B[:N, 1:]), row(S[:N, 1:]), row(LH[:N, :])))
+    # The sides of d without the quotient (vertex.panel_side_residuals), with the roles of
+    # the panel cell: a = (i, j), b = (i+1, j), c = (i, j+1).
+    sides_res = vx.panel_side_residuals(A[:N, :M], PI - B[1:, :M], B[:N, 1:], LV[:, :M],
+                                        LH[:N, :], LV[:, 1:], LH[1:, :])
+    march_res = ca.vec(ca.vertcat(row(A[1:, 1:]) - xs[0, :], row(B[1:, 1:]) - xs[1, :],
+                                  *(row(r) for r in sides_res)))
+    mu = ys[1, :].T
+    th_res = ca.vertcat(ca.vec(TH[1:, 0] - TH[:N, 0] - (A[:N, 0] - B[1:, 0])),
+                        ca.vec(TH[:, 1:] - TH[:, :M] - (PI - A[:, 1:] - B[:, 1:])))
+    # Boundary design vector in BoundaryData.to_vector order.
+    bvec = ca.vertcat(A[:, 0], A[0, 1:].T, B[:, 0], B[0, 1:].T, LV[:, 0], LH[0, :].T)
+    sides = ca.vertcat(ca.vec(LH), ca.vec(LV))
+    mean_res, mean = tree.residuals(sides, v["P"])
+    sign = ca.DM(np.where(setup.mu_outside, 1.0, -1.0))
+    nv = N + 1 + M
+    mv, lo_mv, hi_mv = setup.boundary_mv(bvec[:nv], bvec[nv:2 * nv])
+    lo_mu, hi_mu = setup.mu_bounds()
+    return PatternRows(
+        march=march_res, edges=th_res, mean=mean_res,
+        inequalities=ca.vertcat(sign * (mu ** 2 - 1), mv, sides - setup.min_length * mean),
+        lower=np.concatenate([lo_mu, lo_mv, np.zeros(sides.numel())]),
+        upper=np.concatenate([hi_mu, hi_mv, np.full(sides.numel(), np.inf)]), boundary=bvec)
+
+
+def fold_rows(v: dict, sigma: np.ndarray, state: dict) -> tuple[ca.MX, ca.MX, ca.MX, list]:
+    """The kinematics of one folded state, lifted (eq:defGrads, eq:finalCalc): the rows of
+    its fold multiplier angles PHI, panel quaternions Q and folded vertices Y, and Y =
+    [Yx, Yy, Yz]. ``v``: the views of the pattern's blocks A, B, LH, LV, TH; ``state``: of
+    the state's blocks omega, PHI, Qw, Qx, Qy, Qz, Yx, Yy, Yz; ``sigma``: the held signs."""
+    A, B, LH, LV, TH = v["A"], v["B"], v["LH"], v["LV"], v["TH"]
+    N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+    quat = [state["Qw"], state["Qx"], state["Qy"], state["Qz"]]
+    qv, qh, phi_res = local_crease_quaternions(A, B, sigma, TH, state["omega"], state["PHI"])
+    prod_row1 = qmul([c[0, :M - 1] for c in quat], qv)
+    prod_rows = qmul([c[:N - 1, :] for c in quat], qh)
+    q_res = ca.vertcat(*(ca.vec(c[0, 1:] - p) for c, p in zip(quat, prod_row1)),
+                       *(ca.vec(c[1:, :] - p) for c, p in zip(quat, prod_rows)))
+    Y = [state["Yx"], state["Yy"], state["Yz"]]
+    bottom, vertical = rotated_edges(quat, A, TH, LH, LV)
+    y_res = ca.vertcat(*(ca.vec(c[0, 1:] - c[0, :M] - b) for c, b in zip(Y, bottom)),
+                       *(ca.vec(c[1:, :] - c[:N, :] - e) for c, e in zip(Y, vertical)))
+    return phi_res, q_res, y_res, Y
+
+
+class Projection:
     """The simultaneous NLP's :attr:`NLP.project`: x -> the point of x's boundary data,
     omega, alignment and controls, marched and folded, through one buffered CasADi Function
     of x (:func:`marching.marched_function` and the mean tree: the solver's trial points

@@ -1,0 +1,147 @@
+"""Several folded states of one sheet as one simultaneous NLP (:func:`several_states`): the
+crease pattern's variables and rows once, the kinematics, omega, alignment and loss of every
+state beside them (docs/several_states.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from ...model import numpy_model
+from ...targets import shape
+from .correspondence import GRID_REGULARIZATION
+from .inputs import Setup, damping_weights
+from .lifting import MeanTree, sides_by_antidiagonal
+from .loss import design_residuals, state_residuals
+from .nlp import NLP, Layout, StateFunctions
+from .simultaneous_nlp import fold_rows, marched_blocks, pattern_blocks, pattern_rows, state_blocks
+
+PI = np.pi
+
+
+def several_states(setups: Sequence[Setup], weights: Sequence[float]) -> NLP:
+    """One crease pattern folded into K >= 2 states: state k at its own omega_k, aligned by
+    its own rigid motion onto its own target (``setups[k]``: its omega and bounds, its
+    alignment, target lattice, spacing, loss weights, correspondence or curvature loss),
+    its loss times sqrt(``weights[k]``).
+
+    The pattern's blocks and rows are those of :func:`.simultaneous_nlp.simultaneous`,
+    once; each state has the kinematics blocks and rows of that transcription
+    (:func:`.simultaneous_nlp.fold_rows`) and, with a free correspondence, its controls.
+    What the states share comes from ``setups[0]``: the initial boundary data, the
+    constraints, the Miura reference of the Tikhonov term (on the pattern alone: the
+    omegas are free of it) and the held groups ``fixed`` ("omega" holds every omega).
+    The variables are the pattern's, each state's kinematics and controls, then the
+    global ones, omega_k and the alignment (q_k, t_k) of each state (``parts``: local,
+    global). ``states`` holds each state's Functions; ``unpack``, ``folded`` and
+    ``free_target`` are the first state's. The NLP has no stencil Jacobians: IPOPT solves
+    it (docs/several_states.md)."""
+    first = setups[0]
+    N, M = first.boundary.N, first.boundary.M
+    K = len(setups)
+    tree = MeanTree((N + 1) * M + N * (M + 1), order=sides_by_antidiagonal(N, M))
+    names = [list(state_blocks(N, M, s.correspondence)) for s in setups]
+    lay = Layout({**pattern_blocks(N, M, tree),
+                  **{f"{n}{k}": shp for k, s in enumerate(setups)
+                     for n, shp in state_blocks(N, M, s.correspondence).items()},
+                  **{f"omega{k}": (1, 1) for k in range(K)},
+                  **{f"rigid{k}": (7, 1) for k in range(K)}})
+    parts = (ca.MX.sym("x", lay.size - 8 * K), ca.MX.sym("x_global", 8 * K))
+    x = ca.vertcat(*parts)
+    v = lay.views(x)
+    start = numpy_model.march(first.boundary)
+    pattern = pattern_rows(first, v, start, tree)
+    kinematics, losses, own, rows = [], [], [], []
+    lower, upper = [], []
+    functions = []
+    for k, setup in enumerate(setups):
+        state = {n: v[f"{n}{k}"] for n in names[k]} | {"omega": v[f"omega{k}"]}
+        phi_res, q_res, y_res, Y = fold_rows(v, start.sigma, state)
+        kinematics += [phi_res, q_res, y_res]
+        corr = setup.correspondence
+        grid = None if corr is None else (state["U"], state["V"])
+        rigid = v[f"rigid{k}"]
+        losses.append(np.sqrt(weights[k]) * state_residuals(setup, shape.coarse_grain(Y),
+                                                              rigid, grid))
+        if k == 0:  # the pattern's Tikhonov term, omega held at its reference
+            own.append(design_residuals(first, rigid, ca.vertcat(
+                pattern.boundary, first.reference_omega), grid))
+        else:
+            own.append(ca.sumsqr(rigid[:4]) - 1)
+            if grid is not None:
+                own.append(corr.residuals(*grid, GRID_REGULARIZATION
+                                          * first.weights.get("regularization", 0)))
+        if corr is not None:
+            g_k, lo, hi = corr.rows(*grid)
+            rows.append(g_k)
+            lower.append(lo)
+            upper.append(hi)
+        functions.append(StateFunctions(
+            omega=ca.Function(f"omega{k}", [x], [state["omega"]]),
+            folded=ca.Function(f"folded{k}", [x], Y),
+            target=None if corr is None else ca.Function(f"target{k}", [x],
+                                                         corr.lattice(*grid))))
+    g = ca.vertcat(pattern.march, pattern.edges, *kinematics, pattern.mean,
+                   pattern.inequalities, *rows)
+    n_eq = g.numel() - pattern.inequalities.numel() - sum(r.numel() for r in rows)
+    lbg = np.concatenate([np.zeros(n_eq), pattern.lower, *lower])
+    ubg = np.concatenate([np.zeros(n_eq), pattern.upper, *upper])
+    x0 = np.zeros(lay.size)
+    for k, setup in enumerate(setups):
+        blocks = marched_blocks(setup, tree)
+        mine = {n: blocks[n] for n in names[k]} | {"omega": blocks["omega"],
+                                                  "rigid": blocks["rigid"]}
+        if k == 0:
+            mine |= {n: blocks[n] for n in ("A", "B", "LH", "LV", "TH", "P")}
+        for name, value in mine.items():
+            key = name if name in lay.slices else f"{name}{k}"
+            x0[lay.slices[key]] = value
+    lbx, ubx, groups = _bounds(setups, lay, x0)
+    lengths = np.zeros(lay.size, dtype=bool)
+    for name in lay.shapes:
+        if name[:2] in ("LH", "LV", "Yx", "Yy", "Yz") or name == "P":
+            lengths[lay.slices[name]] = True
+        if name.startswith("rigid"):
+            lengths[lay.slices[name].stop - 3:lay.slices[name].stop] = True
+    state0 = functions[0]
+    return NLP(x=x, residuals=ca.vertcat(*losses, *own), g=g, lbg=lbg, ubg=ubg, lbx=lbx,
+               ubx=ubx, x0=x0,
+               unpack=ca.Function("unpack", [x], [pattern.boundary, v["omega0"]]),
+               folded=state0.folded, groups=groups, parts=parts,
+               damping_weights=damping_weights(first, lengths), free_target=state0.target,
+               states=tuple(functions))
+
+
+def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(lbx, ubx, groups) of :func:`several_states`' variables: the pattern's as in the
+    simultaneous transcription, each state's omega within its bounds, its first panel's
+    rotation the identity and its first vertex at 0 (eq:creaseInputs), its controls in its
+    domain; the held groups at ``x0``."""
+    first = setups[0]
+    lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
+    for name in ("A", "B"):
+        lbx[lay.slices[name]], ubx[lay.slices[name]] = first.min_angle, PI - first.min_angle
+    for name in ("LH", "LV"):
+        lbx[lay.slices[name]] = 1e-9 * first.spacing
+    lbx[lay.index("TH", 0, 0)] = ubx[lay.index("TH", 0, 0)] = 0.0
+    for k, setup in enumerate(setups):
+        lbx[lay.slices[f"omega{k}"]], ubx[lay.slices[f"omega{k}"]] = setup.omega_bounds
+        for name in ("Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):
+            lbx[lay.index(f"{name}{k}", 0, 0)] = ubx[lay.index(f"{name}{k}", 0, 0)] = 0.0
+        lbx[lay.index(f"Qw{k}", 0, 0)] = ubx[lay.index(f"Qw{k}", 0, 0)] = 1.0
+        if setup.correspondence is not None:
+            grid = np.concatenate([np.arange(lay.size)[lay.slices[f"{n}{k}"]]
+                                   for n in ("U", "V")])
+            lbx[grid], ubx[grid] = setup.correspondence.bounds()
+    groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
+                                       + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
+              "lengths": np.concatenate([lay.index("LV", slice(None), 0),
+                                         lay.index("LH", 0, slice(None))]),
+              "omega": np.array([lay.index(f"omega{k}", 0, 0)[0]
+                                 for k in range(len(setups))])}
+    for name in first.fixed:
+        lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
+    return lbx, ubx, groups

@@ -1,0 +1,201 @@
+"""One sheet designed for several targets (docs/several_states.md): the problem and its file,
+the NLP of every state against the NumPy model, a known pattern's two folded states
+recovered from targets in unknown poses, and the result's file."""
+
+from __future__ import annotations
+
+import json
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import rffqm_nlp as rq
+from rffqm_nlp.design import several
+from rffqm_nlp.errors import InputError
+
+PANELS = (12, 12)
+
+
+def polynomial_surface(lattice: np.ndarray):
+    """The tensor polynomial through a (k, k, 3) lattice at the uniform grid of [-1, 1]^2:
+    a target whose uniform lattice is exactly ``lattice``."""
+    k = lattice.shape[0]
+    inverse = np.linalg.inv(np.vander(np.linspace(-1, 1, k), k, increasing=True))
+    coefficients = [inverse @ lattice[..., c] @ inverse.T for c in range(3)]
+
+    def r(u, v):
+        return tuple(sum(a[p, q] * u ** p * v ** q for p in range(k) for q in range(k))
+                     for a in coefficients)
+
+    return rq.surfaces.Custom(r, ((-1.0, 1.0), (-1.0, 1.0)))
+
+
+@pytest.fixture(scope="module")
+def known():
+    """A designed pattern (the sphere cap's) and its coarse lattice at two folds, each
+    moved by a random rigid motion, as exact targets."""
+    truth = rq.DesignProblem(target=rq.surfaces.get("sphere_cap"), panels=PANELS).solve()
+    rng = np.random.default_rng(1)
+    omegas = (truth.omega, 1.3)
+    targets = []
+    for omega in omegas:
+        lattice = rq.numpy_model.fold(truth.pattern, omega)[::2, ::2]
+        R = Rotation.random(random_state=rng).as_matrix()
+        targets.append(polynomial_surface(lattice @ R.T + rng.normal(size=3)))
+    return truth, omegas, targets
+
+
+def test_polynomial_target_is_exact(known):
+    truth, omegas, targets = known
+    lattice = targets[0].lattice(PANELS[0] // 2, PANELS[1] // 2)
+    coarse = rq.numpy_model.fold(truth.pattern, omegas[0])[::2, ::2]
+    assert rq.shape.kabsch(coarse, lattice)[2] < 1e-9 * targets[0].diameter()
+
+
+def test_two_states_of_a_known_pattern_come_back(known):
+    truth, omegas, targets = known
+    problem = rq.DesignProblem(target=targets, panels=PANELS, correspondence="lattice")
+    result = problem.solve(continuation=(1.0, 0.1, 0.01, 0.001))
+    assert result.stats.success and len(result.states) == 2
+    for state, omega in zip(result.states, omegas):
+        assert abs(state.omega - omega) <= 0.02
+        assert state.fit.rms <= 0.002
+        assert state.fit.collision_free is not None
+    first = result.states[0]
+    assert first.omega == result.omega and first.fit == result.fit
+    assert np.array_equal(first.folded, result.folded)
+    # each state is the one pattern folded at its omega and moved onto its target
+    for state in result.states:
+        moved = rq.numpy_model.fold(result.pattern, state.omega) @ state.rotation.T
+        np.testing.assert_allclose(moved + state.translation, state.folded, atol=1e-9)
+    assert several.SOLVER_NOTE in result.notes and result.stats.solver == "ipopt"
+
+
+def test_fixed_omega_is_kept(known):
+    _, omegas, targets = known
+    result = rq.DesignProblem(target=targets, panels=PANELS, correspondence="lattice",
+                              omega=[None, omegas[1]], state_weights=[1.0, 2.0]).solve()
+    assert result.states[1].omega == pytest.approx(omegas[1], abs=1e-12)
+
+
+def test_nlp_of_every_state_marches_with_the_numpy_model(known):
+    _, _, targets = known
+    problem = rq.DesignProblem(target=targets, panels=PANELS)
+    starts = several.state_starts(problem)
+    nlp = several.transcribe_states(problem, starts, problem.weights)
+    g = ca.Function("g", [nlp.x], [nlp.g])(nlp.x0).full().ravel()
+    equal = nlp.lbg == nlp.ubg
+    assert np.abs(g[equal]).max() < 1e-10
+    assert np.all(g[~equal] >= nlp.lbg[~equal] - 1e-12)
+    pattern = rq.numpy_model.march(starts[0].boundary)
+    for functions, start in zip(nlp.states, starts):
+        assert functions.omega_value(nlp.x0) == pytest.approx(start.omega)
+        np.testing.assert_allclose(functions.folded_array(nlp.x0),
+                                   rq.numpy_model.fold(pattern, start.omega), atol=1e-10)
+    # the free correspondence of each state is its own
+    assert nlp.states[0].target is not None and nlp.states[1].target is not None
+
+
+@pytest.mark.parametrize("given, message", [
+    (dict(target=[]), "a list of 2 to 8 targets"),
+    (dict(target=[rq.surfaces.get("sphere_cap")] * 9), "a list of 2 to 8 targets"),
+    (dict(target=[rq.surfaces.get("sphere_cap"), "cap"]), "target[1] must be a surface"),
+    (dict(target=[rq.surfaces.get("sphere_cap")] * 2, omega=[1.0]), "2 to 8 items"),
+    (dict(target=[rq.surfaces.get("sphere_cap")] * 2, omega=[1.0, 1.0, 1.0]),
+     "one entry per target"),
+    (dict(target=[rq.surfaces.get("sphere_cap")] * 2, state_weights=[1.0, 0.0]),
+     "state_weights[1]"),
+    (dict(target=rq.surfaces.get("sphere_cap"), omega=[1.0, 2.0]), "omega0 and fix"),
+])
+def test_problem_refuses(given, message):
+    with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        rq.DesignProblem(**given)
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(solver="closed-form"), "closed-form"), (dict(multistart=2), "multistart"),
+    (dict(stop_rms=0.01), "stop_rms"), (dict(transcription="sequential", solver="ipopt"),
+                                        "simultaneous")])
+def test_solve_refuses_options_of_one_state(options, message):
+    cap = rq.surfaces.get("sphere_cap")
+    with pytest.raises(InputError, match=message):
+        rq.DesignProblem(target=[cap, cap], panels=PANELS).solve(**options)
+    with pytest.raises(InputError, match="min_clearance"):
+        rq.DesignProblem(target=[cap, cap], panels=PANELS, min_clearance=0.01).solve()
+
+
+def test_replace_keeps_every_target():
+    from dataclasses import replace
+    cap, hyp = rq.surfaces.get("sphere_cap"), rq.surfaces.get("hyperboloid")
+    problem = replace(rq.DesignProblem(target=[cap, hyp], omega=[None, 2.0]), panels=(12, 12))
+    assert problem.targets == (cap, hyp) and problem.omega == (None, 2.0)
+
+
+def test_design_file_of_several_targets_round_trips(tmp_path):
+    text = """
+[[target]]
+name = "sphere_cap"
+
+[[target]]
+name = "hyperboloid"
+omega = 2.2
+weight = 0.5
+
+[design]
+panels = [8, 8]
+"""
+    path = tmp_path / "two.toml"
+    path.write_text(text)
+    problem, _ = rq.load_design(path)
+    assert [t.name for t in problem.targets] == ["sphere_cap", "hyperboloid"]
+    assert problem.omega == (None, 2.2) and problem.state_weights == (1.0, 0.5)
+    again, _ = rq.design.schema.from_config(problem.to_config())
+    assert again.omega == problem.omega and again.state_weights == problem.state_weights
+    assert [t.name for t in again.targets] == ["sphere_cap", "hyperboloid"]
+
+
+@pytest.mark.parametrize("tables, message", [
+    ('[[target]]\nname = "sphere_cap"\n', "2 to 8 times"),
+    ('[[target]]\nname = "sphere_cap"\nomega = 9.0\n[[target]]\nname = "sphere_cap"\n',
+     r"state 1 \[\[target\]\] omega must be"),
+    ('[[target]]\nname = "sphere_cap"\nweight = -1\n[[target]]\nname = "sphere_cap"\n',
+     r"state 1 \[\[target\]\] weight must be"),
+])
+def test_design_file_refuses(tmp_path, tables, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(tables)
+    with pytest.raises(InputError, match=message):
+        rq.load_design(path)
+
+
+@pytest.fixture(scope="module")
+def two_states(known):
+    _, _, targets = known
+    return rq.DesignProblem(target=targets, panels=PANELS, correspondence="lattice").solve()
+
+
+def test_result_file_keeps_every_state(two_states, tmp_path):
+    path = two_states.save(tmp_path / "run")
+    loaded = rq.DesignResult.load(path)
+    assert len(loaded.states) == 2
+    for mine, theirs in zip(two_states.states, loaded.states):
+        assert mine.omega == theirs.omega and mine.fit == theirs.fit
+        np.testing.assert_array_equal(mine.folded, theirs.folded)
+    data = json.loads(path.read_text())
+    data["states"][0]["folded"][0][0][0] += 1.0
+    with pytest.raises(InputError, match=r"states\[0\]: folded does not match"):
+        rq.DesignResult.from_dict(data)
+    data = json.loads(path.read_text())
+    data["states"] = [data["states"][0]] * 8
+    with pytest.raises(InputError, match="at most 7 states"):
+        rq.DesignResult.from_dict(data)
+
+
+def test_version_2_result_is_read_as_one_state(two_states):
+    data = two_states.to_dict()
+    data.pop("states")
+    data["version"] = 2
+    loaded = rq.DesignResult.from_dict(data)
+    assert len(loaded.states) == 1 and loaded.omega == two_states.omega
