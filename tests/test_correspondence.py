@@ -130,7 +130,7 @@ def test_the_clamped_basis_is_a_partition_of_unity_reproducing_the_identity(n, k
 
 def test_the_controls_do_not_grow_with_the_pattern():
     problem, _ = sphere_cap()
-    big = replace(problem, panels=(200, 120))._correspondence()
+    big = replace(problem, panels=(200, 120)).correspondence_of()
     assert big.Bu.shape == (101, 4) and big.Bv.shape == (61, 4)
     assert big.size == 2 * transcription.GRID_CONTROLS ** 2 == 32
 

@@ -1,4 +1,4 @@
-"""Result files: typed fit and statistics, the version 2 format, validation on load."""
+"""Result files: typed fit and statistics, the version 3 format, validation on load."""
 
 import json
 import warnings
@@ -37,7 +37,7 @@ def test_round_trip_keeps_every_field(result, tmp_path):
     for name in ("folded", "target_points", "rotation", "translation", "x"):
         np.testing.assert_array_equal(getattr(back, name), getattr(result, name))
     np.testing.assert_array_equal(back.pattern.X, result.pattern.X)
-    assert json.loads((tmp_path / "run" / "result.json").read_text())["version"] == 2
+    assert json.loads((tmp_path / "run" / "result.json").read_text())["version"] == 3
 
 
 def test_fit_and_stats_round_trip_through_dicts(result):
@@ -127,8 +127,8 @@ def test_version_1_is_migrated_its_solve_keys_moved_from_design(result, tmp_path
     assert back.problem == migrated["problem"] and back.fit == result.fit
     problem, options = rq.design.from_config(back.problem)
     assert options.solver == result.stats.solver and options.stop_rms == 0.05
-    with pytest.raises(rq.InputError, match="version 3 is not supported"):
-        DesignResult.from_dict({**data, "version": 3})
+    with pytest.raises(rq.InputError, match="version 4 is not supported"):
+        DesignResult.from_dict({**data, "version": 4})
 
 
 def test_save_refuses_nan_and_writes_nothing(result, tmp_path):
