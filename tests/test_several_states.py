@@ -9,11 +9,13 @@ import json
 import casadi as ca
 import numpy as np
 import pytest
+from scipy.interpolate import RectBivariateSpline
 from scipy.spatial.transform import Rotation
 
 import rffqm_nlp as rq
-from rffqm_nlp.design import several
+from rffqm_nlp.design import several, transcription
 from rffqm_nlp.errors import InputError
+from rffqm_nlp.show import view
 
 PANELS = (12, 12)
 
@@ -83,13 +85,14 @@ def test_fixed_omega_is_kept(known):
 def test_nlp_of_every_state_marches_with_the_numpy_model(known):
     _, _, targets = known
     problem = rq.DesignProblem(target=targets, panels=PANELS)
-    starts = several.state_starts(problem)
-    nlp = several.transcribe_states(problem, starts, problem.weights)
+    plan = several.plan(problem, several.first_problem(problem).start())
+    starts = plan.states
+    nlp = several.transcribe_states(problem, plan, problem.weights)
     g = ca.Function("g", [nlp.x], [nlp.g])(nlp.x0).full().ravel()
     equal = nlp.lbg == nlp.ubg
     assert np.abs(g[equal]).max() < 1e-10
     assert np.all(g[~equal] >= nlp.lbg[~equal] - 1e-12)
-    pattern = rq.numpy_model.march(starts[0].boundary)
+    pattern = rq.numpy_model.march(plan.reference.boundary)
     for functions, start in zip(nlp.states, starts):
         assert functions.omega_value(nlp.x0) == pytest.approx(start.omega)
         np.testing.assert_allclose(functions.folded_array(nlp.x0),
@@ -199,3 +202,88 @@ def test_version_2_result_is_read_as_one_state(two_states):
     data["version"] = 2
     loaded = rq.DesignResult.from_dict(data)
     assert len(loaded.states) == 1 and loaded.omega == two_states.omega
+
+
+@pytest.mark.parametrize("orientation", transcription.ORIENTATIONS)
+def test_an_orientation_relabels_the_lattice_alike_in_numpy_and_casadi(orientation):
+    lattice = np.random.default_rng(0).normal(size=(4, 6, 3))
+    mine = transcription.oriented(lattice, orientation)
+    theirs = transcription.oriented([ca.DM(lattice[..., c]) for c in range(3)], orientation)
+    np.testing.assert_array_equal(mine, np.stack([c.full() for c in theirs], axis=-1))
+    assert mine.shape == ((6, 4, 3) if orientation[0] else (4, 6, 3))
+    assert sorted(map(tuple, mine.reshape(-1, 3))) == sorted(map(tuple, lattice.reshape(-1, 3)))
+    others = [transcription.oriented(lattice[:4, :4], o) for o in transcription.ORIENTATIONS]
+    assert sum(np.array_equal(a, others[0]) for a in others) == 1  # eight distinct
+
+
+def test_two_mesh_states_of_a_known_pattern(known):
+    """Meshes through the two lattices (four times finer), each in its own pose: their
+    orientations are screened, and the fits and folds are those docs/several_states.md
+    reports for mesh targets."""
+    truth, omegas, _ = known
+    rng = np.random.default_rng(2)
+    meshes = []
+    for omega in omegas:
+        lattice = rq.numpy_model.fold(truth.pattern, omega)[::2, ::2]
+        index = np.arange(lattice.shape[0])
+        fine = np.linspace(0, index[-1], 4 * index[-1] + 1)
+        points = np.stack([RectBivariateSpline(index, index, lattice[..., c])(fine, fine)
+                           for c in range(3)], -1)
+        moved = points.reshape(-1, 3) @ Rotation.random(random_state=rng).as_matrix().T
+        meshes.append(rq.surfaces.Mesh((moved, rq.surfaces.grid_faces(*points.shape[:2]))))
+    result = rq.DesignProblem(target=meshes, panels=PANELS).solve(
+        continuation=(1.0, 0.1, 0.01, 0.001))
+    assert any("the least loss of the eight orientations screened" in n for n in result.notes)
+    for state, omega in zip(result.states, omegas):
+        assert abs(state.omega - omega) <= 0.1 and state.fit.rms <= 0.005
+
+
+def test_the_view_marks_every_state(two_states):
+    steps = view.spec(two_states, frames=8)["layout"]["sliders"][0]["steps"]
+    marked = {step["label"]: float(step["value"]) for step in steps
+              if not step["label"][0].isdigit()}
+    assert marked == {view.DESIGNED: two_states.omega,
+                      "state 2": two_states.states[1].omega}
+    values = [float(step["value"]) for step in steps]
+    assert values == sorted(values) and len(steps) == 8 + 1 + 1
+
+
+def test_rffqm_design_writes_every_state(tmp_path):
+    """`rffqm design` of a file with two [[target]] tables: the table prints both states,
+    the result keeps both, the FOLD file folds through both omegas and lists them."""
+    from typer.testing import CliRunner
+
+    from rffqm_nlp.cli import app
+
+    design = tmp_path / "two.toml"
+    design.write_text('[[target]]\nname = "sphere_cap"\n\n[[target]]\nname = "sphere_cap"\n'
+                      'radius = 2.0\nomega = 2.4\n\n[design]\npanels = [8, 8]\n')
+    out = tmp_path / "run"
+    res = CliRunner().invoke(app, ["design", str(design), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "state 2" in res.output
+    loaded = rq.DesignResult.load(out)
+    assert [s.omega for s in loaded.states][1] == 2.4
+    fold = json.loads((out / "pattern.fold").read_text())
+    assert [s["omega"] for s in fold["rffqm:states"]] == [s.omega for s in loaded.states]
+    frames = [f["rffqm:omega"] for f in fold["file_frames"]]
+    assert all(s.omega in frames for s in loaded.states) and frames[0] == 0.0
+
+
+def test_a_curvature_target_and_a_surface_share_one_nlp():
+    """Targets of both kinds: the curvature state's loss is its kind's, the surface's
+    its; the NLP marches at its start and each state folds as the NumPy model does."""
+    problem = rq.DesignProblem(target=[rq.surfaces.Curvature(K=1.0, size=(1.2, 1.2)),
+                                       rq.surfaces.get("sphere_cap", radius=1.0)],
+                               panels=(8, 8))
+    assert problem.weights_of(problem.targets[1])["position"] == 1.0
+    assert "position" not in problem.weights_of(problem.targets[0])
+    first = several.first_problem(problem).start()
+    plan = several.plan(problem, first)
+    nlp = several.transcribe_states(problem, plan, problem.weights)
+    g = ca.Function("g", [nlp.x], [nlp.g])(nlp.x0).full().ravel()
+    assert np.abs(g[nlp.lbg == nlp.ubg]).max() < 1e-10
+    pattern = rq.numpy_model.march(first.boundary)
+    for functions, start in zip(nlp.states, plan.states):
+        np.testing.assert_allclose(functions.folded_array(nlp.x0),
+                                   rq.numpy_model.fold(pattern, start.omega), atol=1e-10)

@@ -48,9 +48,21 @@ def target_for_render(result: "DesignResult", target=None, trust: bool = False):
 
 def export_options(result: "DesignResult") -> dict:
     """The options every exporter is offered (FOLD takes them: its folding states and the
-    target and fit as metadata)."""
-    return {"frames": FRAMES,
-            "metadata": {"target": result.problem.get("target", {}), "fit": result.fit}}
+    target and fit as metadata). A design of several states folds to the farthest of its
+    states on the first's side of the flat state, with every state's omega among the
+    frames, and adds "states": each state's omega and fit."""
+    metadata = {"target": result.problem.get("target", {}), "fit": result.fit}
+    if not result.other_states:
+        return {"frames": FRAMES, "metadata": metadata}
+    from ..model.pattern import motion_omegas
+
+    side = [state.omega for state in result.states
+            if np.sign(state.omega) == np.sign(result.omega)]
+    frames = np.array(sorted(np.union1d(motion_omegas(max(side, key=abs), FRAMES), side),
+                             key=abs))
+    return {"frames": frames, "metadata": {
+        **metadata, "states": [{"omega": state.omega, "fit": state.fit}
+                               for state in result.states]}}
 
 
 def render_files(folder: Path, result: "DesignResult", omega_end: float, frames: int,

@@ -359,16 +359,18 @@ class DesignProblem:
             return None
         return controls
 
-    def correspondence_of(self, target: surfaces.Surface | Curvature | None = None
-                        ) -> transcription.Correspondence | None:
+    def correspondence_of(self, target: surfaces.Surface | Curvature | None = None,
+                          swap: bool = False) -> transcription.Correspondence | None:
         """The free correspondence from the uniform grid onto ``target`` (default the
-        problem's first); None with "lattice", and for a curvature target, which prescribes
-        no positions."""
+        problem's first), of the lattice's shape ((M+1, N+1) with ``swap``, whose
+        transpose lies on the pattern: :func:`rffqm_nlp.design.transcription.oriented`);
+        None with "lattice", and for a curvature target, which prescribes no positions."""
         target = self.target if target is None else target
         if self.correspondence != "free" or isinstance(target, Curvature):
             return None
-        return transcription.Correspondence.uniform(
-            target.casadi_function(), target.domain, (self.N + 1, self.M + 1))
+        shape = (self.M + 1, self.N + 1) if swap else (self.N + 1, self.M + 1)
+        return transcription.Correspondence.uniform(target.casadi_function(), target.domain,
+                                                    shape)
 
     def grid(self, result: DesignResult) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid (U, V), each (N+1, M+1), of a free correspondence at ``result`` (a

@@ -5,7 +5,7 @@ by IPOPT and the result with one :class:`~rffqm_nlp.design.results.State` per ta
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -17,16 +17,21 @@ from ..targets import shape, surfaces
 from ..targets.curvature_target import Curvature
 from . import measure, transcription
 from .options import CLOSED_FORM, LM, SolveOptions
-from .results import DesignResult
+from .results import DesignResult, SolveStats
 from .solvers import ipopt
-from .solvers.context import Run, raise_failure
+from .solvers.context import Outcome, Run, raise_failure
+from .transcription import ORIENTATIONS, oriented
 
 if TYPE_CHECKING:  # for type hints only: the problem calls this module
     from .problem import DesignProblem, Start
 
 #: The folds a free omega_k's start is chosen among (within omega_bounds): the one whose
-#: folded start best fits target k after a rigid alignment (:func:`state_starts`).
+#: folded start best fits target k after a rigid alignment (:func:`plan`).
 START_FOLDS = 41
+#: IPOPT iterations of each screening solve of a mesh's orientation (:func:`screened`).
+SCREEN_ITERATIONS = 20
+#: Largest constraint violation of a screening solve's last point that still counts.
+SCREEN_FEASIBLE = 1e-6
 #: What a solve of several states says of its solver in the result's notes.
 SOLVER_NOTE = ("several states are solved by IPOPT on the simultaneous transcription of "
                "every state (Levenberg-Marquardt designs one state)")
@@ -51,86 +56,160 @@ def refuse_options(problem: DesignProblem, options: SolveOptions,
             raise InputError(f"a design of several targets: {why}")
 
 
-def solve_states(problem: DesignProblem, options: SolveOptions, *,
+@dataclass(frozen=True)
+class Plan:
+    """How a solve of several states starts: the Miura-ori that the Tikhonov term
+    regularizes toward (``reference``), every state's start (``states``: the start's
+    pattern's boundary data, shared, and the state's omega, target lattice laid onto the
+    pattern's indices, spacing and alignment) and how its target lattice is laid on
+    (``orientations``, :data:`rffqm_nlp.design.transcription.ORIENTATIONS`)."""
+
+    reference: Start
+    states: tuple[Start, ...]
+    orientations: tuple[tuple[bool, bool, bool], ...]
+
+
+def first_problem(problem: DesignProblem) -> DesignProblem:
+    """The problem of the first target alone, folded at its fixed omega where given: its
+    start (the Miura-ori or the closed form, :func:`rffqm_nlp.design.solve.starting_design`)
+    is the start of the pattern of every state and the reference of the Tikhonov term."""
+    omega, _ = problem.state_options(0)
+    single = replace(problem, other_targets=(), omega=None, state_weights=None)
+    return single if omega is None else replace(single, omega0=omega)
+
+
+def solve_states(problem: DesignProblem, options: SolveOptions, first: Start, *,
                  callback: Callable[[dict], None] | None = None,
                  verbose: bool = False) -> DesignResult:
-    """Solve ``problem`` (several targets) with ``options``: the starts of
-    :func:`state_starts`, each continuation stage's NLP of every state solved by IPOPT
-    (the solver named by ``options`` is recorded as "ipopt", :data:`SOLVER_NOTE`), the
-    answer re-marched, checked and measured state by state (:func:`result`)."""
+    """Solve ``problem`` (several targets) with ``options`` from ``first``, the start of
+    :func:`first_problem`: the plan of :func:`plan` (each mesh's orientation screened,
+    :func:`screened`), every continuation stage's NLP of all states solved by IPOPT (the
+    solver named by ``options`` is recorded as "ipopt", :data:`SOLVER_NOTE`), the answer
+    re-marched, checked and measured state by state (:func:`result`). Iterations count the
+    screening solves too."""
     problem.check_reachable()
     run = Run(replace(options, solver="ipopt"), callback=callback, verbose=verbose)
-    t1 = time.perf_counter()
-    starts = state_starts(problem)
-    run.build_time += time.perf_counter() - t1
+    chosen, notes = screened(problem, first, run)
+    nlp, outcome = _solve_plan(problem, chosen, run)
+    stats = run.stats(outcome)
+    if not outcome.success:
+        raise_failure(nlp, outcome, stats, run.iterations)
+    notes = ((SOLVER_NOTE,) if options.solver == LM else ()) + notes
+    return result(problem, nlp, chosen, outcome.x, stats, run.options, notes)
+
+
+def _solve_plan(problem: DesignProblem, plan: Plan, run: Run,
+                stages: tuple[float, ...] | None = None) -> tuple[transcription.NLP, Outcome]:
+    """The continuation ``stages`` (default ``run.options``') of one plan by IPOPT, each
+    from the last one's answer."""
     x = None
-    for factor in options.continuation:
+    for factor in run.options.continuation if stages is None else stages:
         t1 = time.perf_counter()
-        nlp = transcribe_states(problem, starts, problem.stage_weights(factor))
+        nlp = transcribe_states(problem, plan, problem.stage_weights(factor))
         run.build_time += time.perf_counter() - t1
         outcome = ipopt.solve(nlp, nlp.x0 if x is None else x, run, panels=problem.panels,
                               warm=x is not None)
         x = outcome.x
         if not outcome.success:
             break
-    stats = run.stats(outcome)
-    if not outcome.success:
-        raise_failure(nlp, outcome, stats, run.iterations)
-    notes = (SOLVER_NOTE,) if options.solver == LM else ()
-    return result(problem, nlp, starts, x, stats, run.options, notes)
+    return nlp, outcome
 
 
-def state_starts(problem: DesignProblem) -> list[Start]:
-    """The start of every state: the first target's Miura start (:meth:`DesignProblem.start`,
-    at its fixed omega where given), and for each further target that pattern folded at
-    its fixed omega or, where omega is designed, at the one of :data:`START_FOLDS` folds
-    within omega_bounds whose coarse lattice best fits the target lattice after a rigid
-    alignment (Kabsch), aligned onto it."""
-    fixed, _ = problem.state_options(0)
-    first = replace(problem, omega0=fixed).start() if fixed is not None else problem.start()
+def plan(problem: DesignProblem, first: Start,
+         orientations: dict[int, tuple[bool, bool, bool]] | None = None) -> Plan:
+    """The start of every state, its target lattice laid on in ``orientations[k]``
+    (default the identity): ``first`` (the start of :func:`first_problem`) for the
+    pattern; each further state at its fixed omega, or at whichever of :data:`START_FOLDS`
+    folds within omega_bounds brings the start's coarse lattice closest to its target
+    lattice after a rigid alignment (Kabsch), aligned onto it."""
+    orientations = orientations or {}
     pattern = numpy_model.march(first.boundary)
-    starts = [first]
+    states, laid = [first], [ORIENTATIONS[0]]
     for k, target in enumerate(problem.other_targets, start=1):
         omega, _ = problem.state_options(k)
-        lattice = target.lattice(problem.N, problem.M)
+        o = orientations.get(k, ORIENTATIONS[0])
+        lattice = oriented(target.lattice(problem.M, problem.N) if o[0]
+                           else target.lattice(problem.N, problem.M), o)
         folds = [omega] if omega is not None else np.linspace(*problem.omega_bounds,
                                                               START_FOLDS)
         coarse = [shape.coarse_grain(numpy_model.fold(pattern, w)) for w in folds]
-        errors = [shape.kabsch(c, lattice)[2] for c in coarse]
-        best = int(np.argmin(errors))
+        best = int(np.argmin([shape.kabsch(c, lattice)[2] for c in coarse]))
         R, t, _ = shape.kabsch(coarse[best], lattice)
         s_i, s_j = surfaces.mean_neighbour_distances(lattice)
-        starts.append(replace(first, omega=float(folds[best]), target_points=lattice,
+        states.append(replace(first, omega=float(folds[best]), target_points=lattice,
                               spacing=0.5 * (s_i + s_j), rotation=R, translation=t))
-    return starts
+        laid.append(o)
+    return Plan(reference=first, states=tuple(states), orientations=tuple(laid))
 
 
-def transcribe_states(problem: DesignProblem, starts: list[Start],
+def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tuple[str, ...]]:
+    """:func:`plan` from ``first`` with the orientation of every further state whose
+    target is a mesh or a point cloud (:class:`~rffqm_nlp.targets.meshes.Mesh`: its
+    parametrization is computed, so which way its lattice runs along the pattern is
+    unknown) chosen among the eight
+    :data:`ORIENTATIONS`, state by state: the one whose first continuation stage, at most
+    :data:`SCREEN_ITERATIONS` IPOPT iterations (counted in ``run``), ends with the least
+    loss at a point that holds the constraints. A surface given by its parametrization is
+    laid on as parametrized. Returns the plan and notes on what was chosen."""
+    chosen_o: dict[int, tuple[bool, bool, bool]] = {}
+    notes = []
+    screen = replace(run.options, max_iter=SCREEN_ITERATIONS)
+    for k, target in enumerate(problem.other_targets, start=1):
+        if not isinstance(target, surfaces.Mesh):
+            continue
+        scores = []
+        for o in ORIENTATIONS:
+            trial = Run(screen)
+            trial_plan = plan(problem, first, {**chosen_o, k: o})
+            nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
+            run.iterations += trial.iterations
+            run.build_time += trial.build_time
+            violation = (np.inf if outcome.g is None else
+                         float(np.max(np.maximum(nlp.lbg - outcome.g, outcome.g - nlp.ubg))))
+            scores.append(outcome.objective if violation <= SCREEN_FEASIBLE else np.inf)
+        chosen_o[k] = ORIENTATIONS[int(np.argmin(scores))]
+        notes.append(f"state {k + 1}'s mesh lattice is laid on "
+                     f"{_orientation_text(chosen_o[k])}, the least loss of the eight "
+                     f"orientations screened")
+    return plan(problem, first, chosen_o), tuple(notes)
+
+
+def _orientation_text(orientation: tuple[bool, bool, bool]) -> str:
+    """How an orientation lays a lattice on, in words."""
+    swap, flip_i, flip_j = orientation
+    words = [w for w, on in (("transposed", swap), ("reversed along i", flip_i),
+                             ("reversed along j", flip_j)) if on]
+    return " and ".join(words) if words else "as its target parametrizes it"
+
+
+def transcribe_states(problem: DesignProblem, plan: Plan,
                       weights: dict[str, float]) -> transcription.NLP:
-    """The NLP of every state (:func:`rffqm_nlp.design.transcription.several_states`) from
-    their starts; ``weights``: the loss weights of the first target's kind (each state's
-    are :meth:`DesignProblem.weights_of` them)."""
+    """The NLP of every state (:func:`rffqm_nlp.design.transcription.several_states`) of
+    ``plan``; ``weights``: the loss weights of the first target's kind (each state's are
+    :meth:`DesignProblem.weights_of` them)."""
     setups, state_weights = [], []
-    first = starts[0]
-    for k, (target, start) in enumerate(zip(problem.targets, starts)):
+    reference = plan.reference
+    for k, (target, start, o) in enumerate(zip(problem.targets, plan.states,
+                                               plan.orientations)):
         omega, weight = problem.state_options(k)
         own = problem.weights_of(target, weights)
         setups.append(transcription.Setup(
-            boundary=first.boundary, omega=start.omega, rotation=start.rotation,
+            boundary=start.boundary, omega=start.omega, rotation=start.rotation,
             translation=start.translation, target=start.target_points, spacing=start.spacing,
             weights=own, min_angle=problem.min_angle, min_length=problem.min_length,
             mu_margin=problem.mu_margin,
             omega_bounds=problem.omega_bounds if omega is None else (omega, omega),
-            fixed=problem.fix, reference=first.boundary, reference_omega=first.omega,
-            correspondence=problem.correspondence_of(target),
+            fixed=problem.fix, reference=reference.boundary,
+            reference_omega=reference.omega,
+            correspondence=problem.correspondence_of(target, swap=o[0]),
             curvature=(transcription.CurvatureLoss.of(target, problem.N, problem.M, own)
                        if isinstance(target, Curvature) else None)))
         state_weights.append(weight)
-    return transcription.several_states(setups, state_weights)
+    return transcription.several_states(setups, state_weights, plan.orientations)
 
 
-def result(problem: DesignProblem, nlp: transcription.NLP, starts: list[Start],
-           x: np.ndarray, stats, options: SolveOptions,
+def result(problem: DesignProblem, nlp: transcription.NLP, plan: Plan,
+           x: np.ndarray, stats: SolveStats, options: SolveOptions,
            notes: tuple[str, ...] = ()) -> DesignResult:
     """The result of a solve of several states at the NLP's point ``x``: the pattern
     re-marched and checked (:func:`.measure.remarched`, :func:`.measure.check_constraints`),
@@ -141,12 +220,13 @@ def result(problem: DesignProblem, nlp: transcription.NLP, starts: list[Start],
     measure.require_finite({"the design vector": x, "the objective": stats.objective},
                            stats, x)
     vec = np.asarray(nlp.unpack(x)[0].full()).ravel()
-    bd = BoundaryData.from_vector(vec, starts[0].boundary.sigma, *problem.panels)
+    bd = BoundaryData.from_vector(vec, plan.reference.boundary.sigma, *problem.panels)
     pattern = measure.remarched(bd, stats, x)
     measure.check_constraints(problem, pattern, stats, x)
     config = problem.config(options)
     states, said = [], list(notes)
-    for k, (target, start, functions) in enumerate(zip(problem.targets, starts, nlp.states)):
+    for k, (target, start, functions) in enumerate(zip(problem.targets, plan.states,
+                                                       nlp.states)):
         state, state_notes = measure.measured_state(
             target, pattern, functions.omega_value(x), functions.folded_array(x),
             functions.target_array(x, start.target_points), stats, x)

@@ -44,7 +44,9 @@ def solve(problem: DesignProblem, options: SolveOptions, *,
                          "curvature target does not have; leave it out")
     if problem.several:
         several.refuse_options(problem, options, warm_start)
-        return several.solve_states(problem, options, callback=callback, verbose=verbose)
+        return several.solve_states(
+            problem, options, starting_design(several.first_problem(problem), options),
+            callback=callback, verbose=verbose)
     if options.solver == CLOSED_FORM:
         return closed_form_result(problem, options)
     if options.multistart != 1:

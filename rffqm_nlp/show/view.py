@@ -25,7 +25,8 @@ The page shows, in the target's frame (every state moved by the design's rigid m
   rebuilt from the result's config without running code), or the target lattice when the
   target cannot be rebuilt;
 * a slider through the folding motion from flat (omega = 0) to folded flat (omega = +-pi,
-  the sign of the designed omega), one step labelled "designed" at the designed omega. Its
+  the sign of the designed omega), one step labelled "designed" at the designed omega (and,
+  for a design of several states, one labelled "state k" at each further state's). Its
   steps restyle x, y, z (and the distances) of the mesh and crease traces; the triangle
   indices are sent once. (``Plotly.animate`` on 3D traces throws a page error.)
 
@@ -422,14 +423,25 @@ def spec(result: DesignResult, frames: int = 24, target: Surface | None = None,
          ties: Sequence | None = None) -> dict:
     """The figure of ``result`` as plain plotly JSON {"data", "layout"}: the traces in the
     order of :data:`TRACES`, a slider with ``frames + 1`` steps (see :func:`slider_omegas`)
-    starting at the designed state, and a button that shows and hides the target
+    starting at the designed state (of a design of several states the first; each further
+    state on the same side of the flat state has a step of its own, labelled "state k" and
+    drawn in the first state's frame), and a button that shows and hides the target
     (``target``, or the result's: see :func:`_target_shape`); with ``ties`` (the lock's
     vertex pairs, :mod:`rffqm_nlp.show.ties`) a last trace of them. Sizes and coordinates
     are checked as the module says (:func:`check_size` first, before any work)."""
     omega = float(result.omega)
     pat = result.pattern
-    check_size(pat.N, pat.M, frames)
+    others = [(float(state.omega), f"state {k + 2}")
+              for k, state in enumerate(getattr(result, "other_states", ()))
+              if np.sign(state.omega) == np.sign(omega)]
+    check_size(pat.N, pat.M, frames + len(others))
     omegas, at = slider_omegas(omega, frames)
+    labels = {}
+    for w, label in others:  # a design's further states on the slider, in the first's frame
+        k = int(np.searchsorted(np.abs(omegas), abs(w)))
+        omegas = np.insert(omegas, k, w)
+        at += k <= at
+        labels = {(n + (n >= k)): text for n, text in labels.items()} | {k: label}
     Y = states(result, omegas)
     T = np.asarray(result.target_points, dtype=float)
     S, faces = _target_shape(result, target)
@@ -443,7 +455,8 @@ def spec(result: DesignResult, frames: int = 24, target: Surface | None = None,
         xyz = _coordinates(Y[n].reshape(-1, 3), paths, decimals)
         restyle = {**xyz, "intensity": [_listed(dist[n], decimals), None, None, None]}
         steps.append({"method": "restyle", "args": [restyle, [0, 1, 2, 3]],
-                      "label": DESIGNED if n == at else f"{w:.2f}", "value": f"{w:.17g}"})
+                      "label": DESIGNED if n == at else labels.get(n, f"{w:.2f}"),
+                      "value": f"{w:.17g}"})
     first = steps[at]["args"][0]
     data = [_mesh(first, pat, first["intensity"][0], cmax), *_creases(first),
             _target(S, faces, decimals)]

@@ -29,10 +29,10 @@ from .loss import loss_residuals, rotation_from_quaternion, smoothness_residuals
 from .nlp import NLP, controls_of
 from .sequential_nlp import sequential
 from .simultaneous_nlp import simultaneous
-from .states_nlp import several_states
+from .states_nlp import ORIENTATIONS, oriented, several_states
 
-__all__ = ["GRID_CONTROLS", "GRID_REGULARIZATION", "MIN_GRID_STEP", "NLP", "Correspondence",
-           "CurvatureLoss",
-           "Setup", "controls_of", "damping_weights", "loss_residuals",
-           "quaternion_from_rotation", "rotation_from_quaternion", "sequential",
-           "several_states", "simultaneous", "smoothness_residuals"]
+__all__ = ["GRID_CONTROLS", "GRID_REGULARIZATION", "MIN_GRID_STEP", "NLP", "ORIENTATIONS",
+           "Correspondence", "CurvatureLoss", "Setup", "controls_of", "damping_weights",
+           "loss_residuals", "oriented", "quaternion_from_rotation",
+           "rotation_from_quaternion", "sequential", "several_states", "simultaneous",
+           "smoothness_residuals"]

@@ -73,14 +73,16 @@ def objective_residuals(setup: Setup, r, rigid, boundary_vec, grid=None) -> ca.M
                       design_residuals(setup, rigid, boundary_vec, grid))
 
 
-def state_residuals(setup: Setup, r, rigid, grid=None) -> ca.MX:
+def state_residuals(setup: Setup, r, rigid, grid=None, lattice=None) -> ca.MX:
     """The loss of one folded state's coarse lattice r against its target: a curvature
     target's :func:`.curvature_loss.curvature_residuals`, else :func:`loss_residuals`
-    after the alignment ``rigid`` (q, t) (7,), against the target lattice at the controls
-    ``grid`` (Cu, Cv) of a free correspondence, or the fixed one with None."""
+    after the alignment ``rigid`` (q, t) (7,), against the target lattice ``lattice``
+    (Tx, Ty, Tz) where given, else at the controls ``grid`` (Cu, Cv) of a free
+    correspondence, else the fixed one (``grid`` None)."""
     if setup.curvature is not None:
         return curvature_residuals(r, setup.curvature)
-    target = setup.target if grid is None else setup.correspondence.lattice(*grid)
+    target = (lattice if lattice is not None else setup.target if grid is None
+              else setup.correspondence.lattice(*grid))
     return loss_residuals(r, rotation_from_quaternion(rigid[:4]), rigid[4:], target,
                           setup.weights, setup.spacing)
 

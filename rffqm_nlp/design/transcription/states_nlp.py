@@ -19,13 +19,39 @@ from .nlp import NLP, Layout, StateFunctions
 from .simultaneous_nlp import fold_rows, marched_blocks, pattern_blocks, pattern_rows, state_blocks
 
 PI = np.pi
+#: How a target lattice's indices are laid onto the pattern's (:func:`oriented`): (swap,
+#: flip_i, flip_j), the eight symmetries of the index rectangle, the identity first.
+ORIENTATIONS = tuple((swap, flip_i, flip_j) for swap in (False, True)
+                     for flip_i in (False, True) for flip_j in (False, True))
 
 
-def several_states(setups: Sequence[Setup], weights: Sequence[float]) -> NLP:
+def oriented(lattice, orientation: tuple[bool, bool, bool]):
+    """A target lattice relabelled onto the pattern's indices: an array (n, m, 3) or a
+    list of matrices (n x m each, NumPy or CasADi) transposed where ``orientation`` swaps
+    (then (m, n)), its rows and columns reversed where it flips i and j (after the swap).
+    The points stay; only which lattice index each belongs to changes."""
+    swap, flip_i, flip_j = orientation
+    if isinstance(lattice, np.ndarray):
+        out = lattice.transpose(1, 0, 2) if swap else lattice
+        out = out[::-1] if flip_i else out
+        return out[:, ::-1] if flip_j else out
+    out = []
+    for c in lattice:
+        c = c.T if swap else c
+        rows, cols = list(range(c.shape[0])), list(range(c.shape[1]))
+        out.append(c[rows[::-1] if flip_i else rows, cols[::-1] if flip_j else cols])
+    return out
+
+
+def several_states(setups: Sequence[Setup], weights: Sequence[float],
+                   orientations: Sequence[tuple[bool, bool, bool]] | None = None) -> NLP:
     """One crease pattern folded into K >= 2 states: state k at its own omega_k, aligned by
     its own rigid motion onto its own target (``setups[k]``: its omega and bounds, its
     alignment, target lattice, spacing, loss weights, correspondence or curvature loss),
-    its loss times sqrt(``weights[k]``).
+    its loss times sqrt(``weights[k]``). ``orientations[k]`` (default the identity) lays a
+    free correspondence's lattice onto the pattern's indices (:func:`oriented`; a fixed
+    target lattice comes oriented in its setup, and a swapped correspondence has the
+    transposed shape).
 
     The pattern's blocks and rows are those of :func:`.simultaneous_nlp.simultaneous`,
     once; each state has the kinematics blocks and rows of that transcription
@@ -62,9 +88,12 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float]) -> NLP:
         kinematics += [phi_res, q_res, y_res]
         corr = setup.correspondence
         grid = None if corr is None else (state["U"], state["V"])
+        lattice = (None if grid is None else
+                   oriented(corr.lattice(*grid), orientations[k] if orientations else
+                            ORIENTATIONS[0]))
         rigid = v[f"rigid{k}"]
         losses.append(np.sqrt(weights[k]) * state_residuals(setup, shape.coarse_grain(Y),
-                                                              rigid, grid))
+                                                              rigid, grid, lattice))
         if k == 0:  # the pattern's Tikhonov term, omega held at its reference
             own.append(design_residuals(first, rigid, ca.vertcat(
                 pattern.boundary, first.reference_omega), grid))
@@ -81,8 +110,7 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float]) -> NLP:
         functions.append(StateFunctions(
             omega=ca.Function(f"omega{k}", [x], [state["omega"]]),
             folded=ca.Function(f"folded{k}", [x], Y),
-            target=None if corr is None else ca.Function(f"target{k}", [x],
-                                                         corr.lattice(*grid))))
+            target=None if corr is None else ca.Function(f"target{k}", [x], lattice)))
     g = ca.vertcat(pattern.march, pattern.edges, *kinematics, pattern.mean,
                    pattern.inequalities, *rows)
     n_eq = g.numel() - pattern.inequalities.numel() - sum(r.numel() for r in rows)
