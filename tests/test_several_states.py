@@ -287,3 +287,19 @@ def test_a_curvature_target_and_a_surface_share_one_nlp():
     for functions, start in zip(nlp.states, plan.states):
         np.testing.assert_allclose(functions.folded_array(nlp.x0),
                                    rq.numpy_model.fold(pattern, start.omega), atol=1e-10)
+
+
+def test_a_study_refuses_a_base_of_several_targets(tmp_path):
+    from typer.testing import CliRunner
+
+    from rffqm_nlp.cli import app
+
+    (tmp_path / "base.toml").write_text('[[target]]\nname = "sphere_cap"\n\n[[target]]\n'
+                                        'name = "hyperboloid"\n')
+    study = tmp_path / "study.toml"
+    study.write_text('base = "base.toml"\n\n[sweep]\n"design.alpha0" = [1.0, 1.1]\n')
+    res = CliRunner().invoke(app, ["sweep", str(study), "--out", str(tmp_path / "out"),
+                                   "--scheduler", "none"])
+    assert res.exit_code == 2
+    assert "a study sweeps designs of one target" in res.output
+    assert len(res.output.strip().splitlines()) == 1

@@ -101,6 +101,10 @@ def base_tables(base: Any, root: Path, trust: bool) -> dict[str, dict[str, Any]]
         tables = read_toml(_ShownPath(path, shown), "base file")
     except InputError as exc:                # names the file by _ShownPath's str
         raise InputError(str(exc)) from None
+    if isinstance(tables.get("target"), list):
+        raise InputError(f"base file {shown}: a study sweeps designs of one target, and this "
+                         f"file has {len(tables['target'])} [[target]] tables (several states "
+                         "of one sheet are designed with rffqm design)")
     try:
         tables = check_table(tables, FILE_KEYS, "")
     except InputError as exc:
