@@ -198,7 +198,8 @@ def test_small_curvatures_march(kx, slope, ky, n, m, layout, omega):
 
 @pytest.mark.parametrize("kwargs", [dict(omega=0.0), dict(panels=(5, 4)), dict(kx="0.1"),
                                     dict(size=(0.0, 1.0)), dict(steps=([1.0], [1.0, 1.0])),
-                                    dict(layout="diagonal"), dict(kx=lambda x: x * np.nan)])
+                                    dict(layout="diagonal"), dict(kx=lambda x: x * np.nan),
+                                    dict(kx=[[], [0.0]])])
 def test_bad_arguments_are_refused(kwargs):
     args = {**dict(kx=0.01, ky=0.0, panels=(4, 4), size=(1.0, 1.0)), **kwargs}
     kx, ky = args.pop("kx"), args.pop("ky")

@@ -245,6 +245,6 @@ def _field(k: CurvatureField, name: str, positions: np.ndarray) -> np.ndarray:
             raise InputError(f"{name} must be a function of the arc length that takes and "
                              f"returns NumPy arrays of numbers: {one_line(exc)}") from exc
         return finite_array(values, name, shape=(n,), allowed="a function with finite values")
-    if np.ndim(k) == 0:
+    if not isinstance(k, (list, tuple, np.ndarray)) or getattr(k, "ndim", 1) == 0:
         return np.full(n, check_value(k, Key("number"), name))
     return finite_array(k, name, shape=(n,), allowed=f"a number, a function or {n} values")
