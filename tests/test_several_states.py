@@ -111,6 +111,8 @@ def test_nlp_of_every_state_marches_with_the_numpy_model(known):
     (dict(target=[rq.surfaces.get("sphere_cap")] * 2, state_weights=[1.0, 0.0]),
      "state_weights[1]"),
     (dict(target=rq.surfaces.get("sphere_cap"), omega=[1.0, 2.0]), "omega0 and fix"),
+    (dict(target=[rq.surfaces.get("sphere_cap")] * 2, omega=[None, 3.12]),
+     "omega[1] = 3.12 lies outside omega_bounds"),
 ])
 def test_problem_refuses(given, message):
     with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):

@@ -13,8 +13,8 @@ How it is solved is a :class:`~rffqm_nlp.design.options.SolveOptions`;
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
 from collections.abc import Sequence
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -91,7 +91,8 @@ class DesignProblem:
     omega_k fits target k, each state with its own alignment (docs/several_states.md).
     ``targets`` holds them all, ``target`` then the first and ``other_targets`` the rest
     (``target=[A, B]`` is ``target=A, other_targets=(B,)``). With several targets:
-    ``omega``, one per target, fixes omega_k where it is a number (None: designed), and
+    ``omega``, one per target, fixes omega_k where it is a number within ``omega_bounds``
+    (None: designed), and
     ``state_weights`` (default all 1) multiply each state's loss.
 
     Parameters (all with defaults chosen so designs are manufacturable):
@@ -166,10 +167,14 @@ class DesignProblem:
             raise InputError(f"[design] omega_bounds and omega0 need omega_bounds[0] <= omega0 "
                              f"<= omega_bounds[1] with omega_bounds[0] < omega_bounds[1], got "
                              f"omega0 = {self.omega0:g}, omega_bounds = [{lo:g}, {hi:g}]")
+        for k, omega in enumerate(self.omega or ()):
+            if omega is not None and not lo <= omega <= hi:
+                raise InputError(f"omega[{k}] = {omega:g} lies outside omega_bounds = "
+                                 f"[{lo:g}, {hi:g}]: fix it within them, or widen them")
 
     def _check_targets(self) -> None:
-        """Set ``targets`` (and ``target``, the first) from the target or list of targets
-        given, and check the states' options (:data:`STATE_KEYS`)."""
+        """Set ``target`` (the first) and ``other_targets`` (the rest) from the target or
+        list of targets given, and check the states' options (:data:`STATE_KEYS`)."""
         given = self.target
         listed = isinstance(given, Sequence) and not isinstance(given, (str, bytes))
         if listed and self.other_targets:

@@ -58,11 +58,12 @@ def refuse_options(problem: DesignProblem, options: SolveOptions,
 
 @dataclass(frozen=True)
 class Plan:
-    """How a solve of several states starts: the Miura-ori that the Tikhonov term
-    regularizes toward (``reference``), every state's start (``states``: the start's
-    pattern's boundary data, shared, and the state's omega, target lattice laid onto the
-    pattern's indices, spacing and alignment) and how its target lattice is laid on
-    (``orientations``, :data:`rffqm_nlp.design.transcription.ORIENTATIONS`)."""
+    """How a solve of several states starts: the first target's start (the Miura-ori or
+    the closed form), which the Tikhonov term regularizes toward (``reference``); every
+    state's start (``states``: that start's boundary data, shared, and the state's omega,
+    target lattice laid onto the pattern's indices, spacing and alignment); how each
+    state's target lattice is laid on (``orientations``,
+    :data:`rffqm_nlp.design.transcription.ORIENTATIONS`)."""
 
     reference: Start
     states: tuple[Start, ...]

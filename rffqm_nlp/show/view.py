@@ -432,7 +432,7 @@ def spec(result: DesignResult, frames: int = 24, target: Surface | None = None,
     omega = float(result.omega)
     pat = result.pattern
     others = [(float(state.omega), f"state {k + 2}")
-              for k, state in enumerate(getattr(result, "other_states", ()))
+              for k, state in enumerate(result.other_states)
               if np.sign(state.omega) == np.sign(omega)]
     check_size(pat.N, pat.M, frames + len(others))
     omegas, at = slider_omegas(omega, frames)
