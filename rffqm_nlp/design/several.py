@@ -147,20 +147,21 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     """:func:`plan` from ``first`` with the orientation of every further state whose
     target is a mesh or a point cloud (:class:`~rffqm_nlp.targets.meshes.Mesh`: its
     parametrization is computed, so which way its lattice runs along the pattern is
-    unknown) chosen among the eight
-    :data:`ORIENTATIONS`, state by state: the one whose first continuation stage, at most
-    :data:`SCREEN_ITERATIONS` IPOPT iterations (counted in ``run``), ends with the least
-    loss at a point that holds the constraints. A surface given by its parametrization is
+    unknown) chosen among the eight :data:`ORIENTATIONS`, state by state: the one whose
+    first continuation stage, at most :data:`SCREEN_ITERATIONS` IPOPT iterations (counted
+    in ``run``, within its time limit), ends with the least loss at a point that holds the
+    constraints (the identity where none does). A surface given by its parametrization is
     laid on as parametrized. Returns the plan and notes on what was chosen."""
     chosen_o: dict[int, tuple[bool, bool, bool]] = {}
     notes = []
-    screen = replace(run.options, max_iter=SCREEN_ITERATIONS)
     for k, target in enumerate(problem.other_targets, start=1):
         if not isinstance(target, surfaces.Mesh):
             continue
         scores = []
         for o in ORIENTATIONS:
-            trial = Run(screen)
+            left = (None if run.deadline is None
+                    else max(run.deadline - time.perf_counter(), 1e-3))
+            trial = Run(replace(run.options, max_iter=SCREEN_ITERATIONS, time_limit=left))
             trial_plan = plan(problem, first, {**chosen_o, k: o})
             nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
             run.iterations += trial.iterations
