@@ -1,6 +1,8 @@
 """The simultaneous transcription (:func:`simultaneous`): every vertex angle and side is a
 variable and the marching equations are equality constraints, panel by panel (many
-variables, sparse Jacobians); and its projection of any point onto the marched designs
+variables, sparse Jacobians); its rows on the crease pattern (:func:`pattern_rows`) and on
+one folded state (:func:`fold_rows`), which a design of several states shares
+(:mod:`.states_nlp`); and its projection of any point onto the marched designs
 (:class:`Projection`)."""
 
 from __future__ import annotations
@@ -13,9 +15,9 @@ import numpy as np
 from ...errors import InputError
 from ...model import numpy_model
 from ...model import vertex as vx
-from ...model.pattern import Pattern
 from ...model.marching import (Evaluation, locate_failure, marched_function, panel_cell, qmul,
                                rotated_edges)
+from ...model.pattern import Pattern
 from ...targets import shape
 from .correspondence import Correspondence, with_grid_rows
 from .inputs import Setup, damping_weights
