@@ -291,17 +291,34 @@ def test_a_curvature_target_and_a_surface_share_one_nlp():
                                    rq.numpy_model.fold(pattern, start.omega), atol=1e-10)
 
 
-def test_a_study_refuses_a_base_of_several_targets(tmp_path):
+def test_a_study_of_several_targets_sweeps_design_keys(tmp_path):
+    """A study whose base has two [[target]] tables: each design is one sheet of two
+    states, its result keeps both, the table's fit columns are the first state's; a target
+    key or an inline [target] is refused in one line."""
     from typer.testing import CliRunner
 
     from rffqm_nlp.cli import app
 
-    (tmp_path / "base.toml").write_text('[[target]]\nname = "sphere_cap"\n\n[[target]]\n'
-                                        'name = "hyperboloid"\n')
+    (tmp_path / "base.toml").write_text(
+        '[[target]]\nname = "sphere_cap"\n\n[[target]]\nname = "sphere_cap"\n'
+        'radius = 2.0\nomega = 2.4\n\n[design]\npanels = [8, 8]\n')
     study = tmp_path / "study.toml"
-    study.write_text('base = "base.toml"\n\n[sweep]\n"design.alpha0" = [1.0, 1.1]\n')
-    res = CliRunner().invoke(app, ["sweep", str(study), "--out", str(tmp_path / "out"),
+    study.write_text('base = "base.toml"\n\n[sweep]\n"design.min_length" = [0.2, 0.25]\n')
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["sweep", str(study), "--out", str(out),
                                    "--scheduler", "none"])
-    assert res.exit_code == 2
-    assert "a study sweeps designs of one target" in res.output
-    assert len(res.output.strip().splitlines()) == 1
+    assert res.exit_code == 0, res.output
+    rows = (out / "results.csv").read_text().splitlines()
+    assert len(rows) == 3 and all(",solved," in row for row in rows[1:])
+    for folder in (out / "designs").iterdir():
+        result = rq.DesignResult.load(folder)
+        assert len(result.states) == 2 and result.states[1].omega == 2.4
+        assert f"{result.fit.rms!r}" in "".join(rows)
+    for text, message in (('"target.radius" = [1.0, 2.0]', "sets a target"),
+                          ('"design.alpha0" = [1.0, 1.1]\n\n[target]\nradius = 3.0',
+                           "cannot be set by a study")):
+        study.write_text(f'base = "base.toml"\n\n[sweep]\n{text}\n')
+        res = CliRunner().invoke(app, ["sweep", str(study), "--out", str(tmp_path / "x"),
+                                       "--scheduler", "none"])
+        assert res.exit_code == 2 and message in res.output, res.output
+        assert len(res.output.strip().splitlines()) == 1

@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import math
 import os
@@ -16,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from ..design import SOLVE_KEYS, DesignProblem
-from ..design.schema import FILE_KEYS
+from ..design import DESIGN_KEYS, SOLVE_KEYS
+from ..design.schema import FILE_KEYS, state_tables
 from ..errors import InputError
 from ..files import Key, check_table, check_value, describe_value, named_path, read_toml, shown_name
 from ..targets.surfaces import resolve_reference
@@ -79,8 +78,9 @@ class Range:
         return float(rng.uniform(self.low, self.high))
 
 
-def base_tables(base: Any, root: Path, trust: bool) -> dict[str, dict[str, Any]]:
-    """The tables of the design file ``base`` (relative to ``root``), a target's
+def base_tables(base: Any, root: Path, trust: bool) -> dict[str, Any]:
+    """The tables of the design file ``base`` (relative to ``root``; its "target" a list of
+    tables where it has several [[target]] tables), a target's
     ``python = "file.py:..."`` made relative to that file. Anything but the path of a .toml
     file inside ``root`` (anywhere with ``trust``, :func:`rffqm_nlp.files.named_path`) is
     refused before it is opened; no message quotes the file's content."""
@@ -101,21 +101,22 @@ def base_tables(base: Any, root: Path, trust: bool) -> dict[str, dict[str, Any]]
         tables = read_toml(_ShownPath(path, shown), "base file")
     except InputError as exc:                # names the file by _ShownPath's str
         raise InputError(str(exc)) from None
-    if isinstance(tables.get("target"), list):
-        raise InputError(f"base file {shown}: a study sweeps designs of one target, and this "
-                         f"file has {len(tables['target'])} [[target]] tables (several states "
-                         "of one sheet are designed with rffqm design)")
+    several = tables.get("target") if isinstance(tables.get("target"), list) else None
     try:
-        tables = check_table(tables, FILE_KEYS, "")
+        tables = check_table({k: v for k, v in tables.items() if k != "target"} if several
+                             else tables, FILE_KEYS, "")
+        if several:
+            state_tables(several)  # 2 to MAX_STATES tables, each state's omega and weight
+        targets = [dict(t) for t in several] if several else [dict(tables.get("target", {}))]
     except InputError as exc:
         raise InputError(f"base file {shown}: {exc}") from None
-    target = tables.get("target", {})
-    if "python" in target:
-        try:
-            tables["target"] = {**target, "python": resolve_reference(target["python"],
-                                                                      path.parent)}
-        except InputError as exc:
-            raise InputError(f"base file {shown}: {exc}") from None
+    for target in targets:
+        if "python" in target:
+            try:
+                target["python"] = resolve_reference(target["python"], path.parent)
+            except InputError as exc:
+                raise InputError(f"base file {shown}: {exc}") from None
+    tables["target"] = targets if several else targets[0]
     return tables
 
 
@@ -144,9 +145,7 @@ def check_key(key: str, where: str = "[sweep]") -> None:
         raise InputError(f"{where}: {shown_name(key)} is not a parameter; name one as "
                          f"\"<table>.<key>\" with table one of {', '.join(TABLES)} (e.g. "
                          "\"target.radius\", \"design.panels\", \"solve.seed\")")
-    known = {"design": [f.name for f in dataclasses.fields(DesignProblem)
-                        if f.name != "target"],
-             "solve": list(SOLVE_KEYS)}.get(table)
+    known = {"design": list(DESIGN_KEYS), "solve": list(SOLVE_KEYS)}.get(table)
     if known is not None and item not in known:
         close = difflib.get_close_matches(item, known, n=1)
         hint = f"did you mean {table}.{close[0]}?" if close else f"known: {', '.join(known)}"

@@ -73,7 +73,9 @@ class Study:
             if table not in TABLES:
                 raise InputError(f"unknown base table {shown_name(table)}; a base has "
                                  f"{', '.join(TABLES)}")
-            if not isinstance(values, Mapping):
+            several = table == "target" and isinstance(values, list)
+            if not isinstance(values, Mapping) and not (
+                    several and all(isinstance(v, Mapping) for v in values)):
                 raise InputError(f"[{table}] must be a table, got {describe_value(values)}")
         if not isinstance(self.parameters, Mapping):
             raise InputError(f"[sweep] must be a table, got {describe_value(self.parameters)}")
@@ -84,6 +86,7 @@ class Study:
         check_value(self.seed, Key("whole", low=0), "[sweep] seed")
         for key, values in self.parameters.items():
             check_key(key)
+            self._check_several(key, "[sweep]")
             if isinstance(values, Range):
                 if key == "design.panels":
                     raise InputError("[sweep] design.panels takes a list of sizes, not a range")
@@ -116,6 +119,7 @@ class Study:
                                          f"{describe_value(value)}")
                     continue
                 check_key(key, where)
+                self._check_several(key, where)
                 if key in self.parameters:
                     raise InputError(f"{key} is both a [sweep] parameter and set by "
                                      f"{where}; keep one")
@@ -174,6 +178,14 @@ class Study:
                                                    if not isinstance(v, Range)])
 
     # -------------------------------------------------------------- loading
+    def _check_several(self, key: str, where: str) -> None:
+        """Refuse a target key where the base designs one sheet for several targets (its
+        [[target]] tables are its states; docs/several_states.md)."""
+        if key.startswith("target.") and isinstance(self.base.get("target"), list):
+            raise InputError(f"{where}: {shown_name(key)} sets a target, and the base has "
+                             f"{len(self.base['target'])} [[target]] tables (one sheet for "
+                             "several states); a study of it sweeps [design] and [solve] keys")
+
     @classmethod
     def load(cls, path: str | os.PathLike, trust: bool = False) -> "Study":
         """A study from its TOML file; ``base`` and a target's ``python = "file.py:..."``
@@ -191,12 +203,21 @@ class Study:
                     trust: bool = False) -> "Study":
         """A study from the tables of a study file (``base`` relative to ``root``)."""
         config = check_table(config, STUDY_FILE_KEYS, "")
-        base: dict[str, dict] = {table: {} for table in TABLES}
+        base: dict[str, Any] = {table: {} for table in TABLES}
         if "base" in config:
             for table, values in base_tables(config["base"], Path(root), trust).items():
-                base[table].update(values)
+                if isinstance(values, list):  # several [[target]] tables: the states
+                    base[table] = values
+                else:
+                    base[table].update(values)
         for table in TABLES:
             inline = config.get(table, {})
+            if isinstance(base[table], list):
+                if inline:
+                    raise InputError("[target] cannot be set by a study whose base has "
+                                     f"{len(base[table])} [[target]] tables (one sheet for "
+                                     "several states); change them in the base file")
+                continue
             if table == "target" and ("name" in inline or "python" in inline):
                 base["target"] = {}
             base[table].update(inline)
@@ -316,7 +337,10 @@ def design_config(base: Mapping[str, Any], overrides: Mapping[str, Any],
     design.panels means (p, p); ``root`` and ``trust`` as for
     :func:`rffqm_nlp.design.from_config`.
     """
-    tables = {table: dict(base.get(table, {})) for table in TABLES}
+    tables: dict[str, Any] = {table: dict(base.get(table, {})) for table in TABLES
+                              if not isinstance(base.get(table), list)}
+    if isinstance(base.get("target"), list):  # the states of one sheet (docs/several_states.md)
+        tables["target"] = [dict(target) for target in base["target"]]
     if "target.name" in overrides or "target.python" in overrides:
         tables["target"] = {}
     for key, value in overrides.items():
