@@ -177,7 +177,6 @@ class Study:
         return math.prod([len(self.cases) or 1] + [len(v) for v in self.parameters.values()
                                                    if not isinstance(v, Range)])
 
-    # -------------------------------------------------------------- loading
     def _check_several(self, key: str, where: str) -> None:
         """Refuse a target key where the base designs one sheet for several targets (its
         [[target]] tables are its states; docs/several_states.md)."""
@@ -186,6 +185,7 @@ class Study:
                              f"{len(self.base['target'])} [[target]] tables (one sheet for "
                              "several states); a study of it sweeps [design] and [solve] keys")
 
+    # -------------------------------------------------------------- loading
     @classmethod
     def load(cls, path: str | os.PathLike, trust: bool = False) -> "Study":
         """A study from its TOML file; ``base`` and a target's ``python = "file.py:..."``
