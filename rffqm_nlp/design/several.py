@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # for type hints only: the problem calls this module
     from .problem import DesignProblem, Start
 
 #: The folds a free omega_k's start is chosen among (within omega_bounds): the one whose
-#: folded start best fits target k after a rigid alignment (:func:`plan`).
+#: folded start best fits target k after a rigid alignment (:func:`fold_scans`, :func:`plan`).
 START_FOLDS = 41
 #: IPOPT iterations of each screening solve of a mesh's orientation (:func:`screened`).
 SCREEN_ITERATIONS = 20
@@ -116,24 +116,37 @@ def _solve_plan(problem: DesignProblem, plan: Plan, run: Run,
     return nlp, outcome
 
 
+def fold_scans(problem: DesignProblem, first: Start
+               ) -> dict[int, tuple[np.ndarray, list[np.ndarray]]]:
+    """For each further state k: the folds its start is chosen among (its fixed omega, or
+    :data:`START_FOLDS` folds within omega_bounds) and the coarse lattice of ``first``'s
+    pattern at each."""
+    pattern = numpy_model.march(first.boundary)
+    scans = {}
+    for k in range(1, len(problem.targets)):
+        omega, _ = problem.state_options(k)
+        folds = (np.array([omega]) if omega is not None
+                 else np.linspace(*problem.omega_bounds, START_FOLDS))
+        scans[k] = folds, [shape.coarse_grain(numpy_model.fold(pattern, w)) for w in folds]
+    return scans
+
+
 def plan(problem: DesignProblem, first: Start,
-         orientations: dict[int, tuple[bool, bool, bool]] | None = None) -> Plan:
+         orientations: dict[int, tuple[bool, bool, bool]] | None = None,
+         scans: dict[int, tuple[np.ndarray, list[np.ndarray]]] | None = None) -> Plan:
     """The start of every state, its target lattice laid on in ``orientations[k]``
     (default the identity): ``first`` (the start of :func:`first_problem`) for the
-    pattern; each further state at its fixed omega, or at whichever of :data:`START_FOLDS`
-    folds within omega_bounds brings the start's coarse lattice closest to its target
-    lattice after a rigid alignment (Kabsch), aligned onto it."""
+    pattern; each further state at whichever of its folds (:func:`fold_scans`, given as
+    ``scans`` or computed) brings the start's coarse lattice closest to its target lattice
+    after a rigid alignment (Kabsch), aligned onto it."""
     orientations = orientations or {}
-    pattern = numpy_model.march(first.boundary)
+    scans = scans or fold_scans(problem, first)
     states, laid = [first], [ORIENTATIONS[0]]
     for k, target in enumerate(problem.other_targets, start=1):
-        omega, _ = problem.state_options(k)
         o = orientations.get(k, ORIENTATIONS[0])
         lattice = oriented(target.lattice(problem.M, problem.N) if o[0]
                            else target.lattice(problem.N, problem.M), o)
-        folds = [omega] if omega is not None else np.linspace(*problem.omega_bounds,
-                                                              START_FOLDS)
-        coarse = [shape.coarse_grain(numpy_model.fold(pattern, w)) for w in folds]
+        folds, coarse = scans[k]
         best = int(np.argmin([shape.kabsch(c, lattice)[2] for c in coarse]))
         R, t, _ = shape.kabsch(coarse[best], lattice)
         s_i, s_j = surfaces.mean_neighbour_distances(lattice)
@@ -154,6 +167,7 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     laid on as parametrized. Returns the plan and notes on what was chosen."""
     chosen_o: dict[int, tuple[bool, bool, bool]] = {}
     notes = []
+    scans = fold_scans(problem, first)
     for k, target in enumerate(problem.other_targets, start=1):
         if not isinstance(target, surfaces.Mesh):
             continue
@@ -162,7 +176,7 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
             left = (None if run.deadline is None
                     else max(run.deadline - time.perf_counter(), 1e-3))
             trial = Run(replace(run.options, max_iter=SCREEN_ITERATIONS, time_limit=left))
-            trial_plan = plan(problem, first, {**chosen_o, k: o})
+            trial_plan = plan(problem, first, {**chosen_o, k: o}, scans)
             nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
             run.iterations += trial.iterations
             run.build_time += trial.build_time
@@ -173,7 +187,7 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
         notes.append(f"state {k + 1}'s mesh lattice is laid on "
                      f"{_orientation_text(chosen_o[k])}, the least loss of the eight "
                      f"orientations screened")
-    return plan(problem, first, chosen_o), tuple(notes)
+    return plan(problem, first, chosen_o, scans), tuple(notes)
 
 
 def _orientation_text(orientation: tuple[bool, bool, bool]) -> str:

@@ -90,19 +90,12 @@ def simultaneous(setup: Setup) -> NLP:
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
     if corr is not None:
         lbx[grid_index], ubx[grid_index] = corr.bounds()
-    for name in ("A", "B"):
-        lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
-    for name in ("LH", "LV"):
-        lbx[lay.slices[name]] = 1e-9 * setup.spacing
+    bound_pattern(setup, lay, lbx, ubx)
     lbx[lay.slices["omega"]], ubx[lay.slices["omega"]] = setup.omega_bounds
-    for name in ("TH", "Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):  # R^{11} = I, y^{11} = 0
+    for name in ("Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):  # R^{11} = I, y^{11} = 0
         lbx[lay.index(name, 0, 0)] = ubx[lay.index(name, 0, 0)] = 0.0
     lbx[lay.index("Qw", 0, 0)] = ubx[lay.index("Qw", 0, 0)] = 1.0
-    groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
-                                       + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
-              "lengths": np.concatenate([lay.index("LV", slice(None), 0),
-                                         lay.index("LH", 0, slice(None))]),
-              "omega": lay.index("omega", 0, 0)}
+    groups = {**pattern_groups(lay), "omega": lay.index("omega", 0, 0)}
     for name in setup.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [pattern.boundary, v["omega"]])
@@ -187,6 +180,27 @@ def state_blocks(N: int, M: int, corr: Correspondence | None) -> dict[str, tuple
     vertices = {name: (N + 1, M + 1) for name in ("Yx", "Yy", "Yz")}
     grid = {} if corr is None else {"U": corr.shape, "V": corr.shape}
     return {**quaternions, **vertices, "PHI": (N - 1, M), **grid}
+
+
+def bound_pattern(setup: Setup, lay: Layout, lbx: np.ndarray, ubx: np.ndarray) -> None:
+    """Set the bounds of the pattern's blocks in ``lbx``, ``ubx`` (lay.size each): every
+    vertex angle in [min_angle, pi - min_angle], every side positive, the first edge
+    direction 0 (eq:creaseInputs)."""
+    for name in ("A", "B"):
+        lbx[lay.slices[name]], ubx[lay.slices[name]] = setup.min_angle, PI - setup.min_angle
+    for name in ("LH", "LV"):
+        lbx[lay.slices[name]] = 1e-9 * setup.spacing
+    lbx[lay.index("TH", 0, 0)] = ubx[lay.index("TH", 0, 0)] = 0.0
+
+
+def pattern_groups(lay: Layout) -> dict[str, np.ndarray]:
+    """Indices in x of the boundary data that ``fix`` can hold: "angles" (A and B along
+    the left edge, then along the bottom edge) and "lengths" (LV along the left edge, LH
+    along the bottom edge)."""
+    return {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
+                                     + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
+            "lengths": np.concatenate([lay.index("LV", slice(None), 0),
+                                       lay.index("LH", 0, slice(None))])}
 
 
 @dataclass(frozen=True)

@@ -16,9 +16,9 @@ from .inputs import Setup, damping_weights
 from .lifting import MeanTree, sides_by_antidiagonal
 from .loss import design_residuals, state_residuals
 from .nlp import NLP, Layout, StateFunctions
-from .simultaneous_nlp import fold_rows, marched_blocks, pattern_blocks, pattern_rows, state_blocks
+from .simultaneous_nlp import (bound_pattern, fold_rows, marched_blocks, pattern_blocks,
+                               pattern_groups, pattern_rows, state_blocks)
 
-PI = np.pi
 #: How a target lattice's indices are laid onto the pattern's (:func:`oriented`): (swap,
 #: flip_i, flip_j), the eight symmetries of the index rectangle, the identity first.
 ORIENTATIONS = tuple((swap, flip_i, flip_j) for swap in (False, True)
@@ -150,11 +150,7 @@ def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
     domain; the held groups at ``x0``."""
     first = setups[0]
     lbx, ubx = np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
-    for name in ("A", "B"):
-        lbx[lay.slices[name]], ubx[lay.slices[name]] = first.min_angle, PI - first.min_angle
-    for name in ("LH", "LV"):
-        lbx[lay.slices[name]] = 1e-9 * first.spacing
-    lbx[lay.index("TH", 0, 0)] = ubx[lay.index("TH", 0, 0)] = 0.0
+    bound_pattern(first, lay, lbx, ubx)
     for k, setup in enumerate(setups):
         lbx[lay.slices[f"omega{k}"]], ubx[lay.slices[f"omega{k}"]] = setup.omega_bounds
         for name in ("Qx", "Qy", "Qz", "Yx", "Yy", "Yz"):
@@ -164,12 +160,8 @@ def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
             grid = np.concatenate([np.arange(lay.size)[lay.slices[f"{n}{k}"]]
                                    for n in ("U", "V")])
             lbx[grid], ubx[grid] = setup.correspondence.bounds()
-    groups = {"angles": np.concatenate([lay.index(n, slice(None), 0) for n in ("A", "B")]
-                                       + [lay.index(n, 0, slice(1, None)) for n in ("A", "B")]),
-              "lengths": np.concatenate([lay.index("LV", slice(None), 0),
-                                         lay.index("LH", 0, slice(None))]),
-              "omega": np.array([lay.index(f"omega{k}", 0, 0)[0]
-                                 for k in range(len(setups))])}
+    groups = {**pattern_groups(lay),
+              "omega": np.array([lay.index(f"omega{k}", 0, 0)[0] for k in range(len(setups))])}
     for name in first.fixed:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     return lbx, ubx, groups
