@@ -72,14 +72,19 @@ def test_two_states_of_a_known_pattern_come_back(known):
     for state in result.states:
         moved = rq.numpy_model.fold(result.pattern, state.omega) @ state.rotation.T
         np.testing.assert_allclose(moved + state.translation, state.folded, atol=1e-9)
-    assert several.SOLVER_NOTE in result.notes and result.stats.solver == "ipopt"
+    # Levenberg-Marquardt on the marching manifold solved it alone
+    assert result.stats.solver == "levenberg-marquardt"
+    assert result.stats.marched_iterations == result.stats.iterations > 0
 
 
-def test_fixed_omega_is_kept(known):
+def test_fixed_omega_is_kept_by_ipopt_too(known):
     _, omegas, targets = known
     result = rq.DesignProblem(target=targets, panels=PANELS, correspondence="lattice",
-                              omega=[None, omegas[1]], state_weights=[1.0, 2.0]).solve()
+                              omega=[None, omegas[1]], state_weights=[1.0, 2.0]
+                              ).solve(solver="ipopt")
+    assert result.stats.solver == "ipopt" and result.stats.marched_iterations == 0
     assert result.states[1].omega == pytest.approx(omegas[1], abs=1e-12)
+    assert abs(result.states[0].omega - omegas[0]) <= 0.02
 
 
 def test_nlp_of_every_state_marches_with_the_numpy_model(known):
@@ -99,6 +104,38 @@ def test_nlp_of_every_state_marches_with_the_numpy_model(known):
                                    rq.numpy_model.fold(pattern, start.omega), atol=1e-10)
     # the free correspondence of each state is its own
     assert nlp.states[0].target is not None and nlp.states[1].target is not None
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_nlp_of_every_state_projects_onto_the_numpy_model(known, seed):
+    """The projection Levenberg-Marquardt marches its trial points with: from perturbed
+    boundary data and other folds, every marching equation holds and each state is the
+    NumPy model's pattern folded at its omega; its Jacobians are the graph's, in CSC order."""
+    _, _, targets = known
+    problem = rq.DesignProblem(target=targets, panels=PANELS)
+    plan = several.plan(problem, several.first_problem(problem).start())
+    nlp = several.transcribe_states(problem, plan, problem.weights)
+    rng = np.random.default_rng(seed)
+    x = nlp.x0.copy()
+    free = nlp.boundary_class >= 0
+    x[free] += 1e-3 * rng.normal(size=int(free.sum()))
+    x[nlp.groups["omega"]] = rng.uniform(1.0, 2.5, size=2)
+    point = nlp.project(x)
+    g = ca.Function("g", [nlp.x], [nlp.g])(point).full().ravel()
+    assert np.abs(g[nlp.lbg == nlp.ubg]).max() < 1e-10
+    boundary = rq.BoundaryData.from_vector(nlp.unpack(point)[0].full().ravel(),
+                                           plan.reference.boundary.sigma, *PANELS)
+    pattern = rq.numpy_model.march(boundary)
+    for functions, omega in zip(nlp.states, x[nlp.groups["omega"]]):
+        assert functions.omega_value(point) == omega
+        np.testing.assert_allclose(functions.folded_array(point),
+                                   rq.numpy_model.fold(pattern, omega), atol=1e-10)
+    for jacobian, rows in ((nlp.g_jacobian, nlp.g), (nlp.r_jacobian, nlp.residuals)):
+        dense = ca.Function("J", [nlp.x], [ca.jacobian(rows, nlp.x)])(point).full()
+        order = jacobian.pattern()
+        assembled = order.copy()
+        assembled.data = jacobian(point)[order.data.astype(int) - 1]
+        np.testing.assert_array_equal(assembled.toarray(), dense)
 
 
 @pytest.mark.parametrize("given, message", [

@@ -1,6 +1,7 @@
 """One sheet designed for several targets (docs/several_states.md): the start of every state,
 the NLP of all of them (:func:`rffqm_nlp.design.transcription.several_states`), its solve
-by IPOPT and the result with one :class:`~rffqm_nlp.design.results.State` per target."""
+(Levenberg-Marquardt handing over to IPOPT, or IPOPT alone, as for one state) and the
+result with one :class:`~rffqm_nlp.design.results.State` per target."""
 
 from __future__ import annotations
 
@@ -16,9 +17,9 @@ from ..model.boundary import BoundaryData
 from ..targets import shape, surfaces
 from ..targets.curvature_target import Curvature
 from . import measure, transcription
-from .options import CLOSED_FORM, LM, SolveOptions
+from .options import CLOSED_FORM, SolveOptions
 from .results import DesignResult, SolveStats
-from .solvers import ipopt
+from .solvers import handover
 from .solvers.context import Outcome, Run, raise_failure
 from .transcription import ORIENTATIONS, oriented
 
@@ -28,13 +29,10 @@ if TYPE_CHECKING:  # for type hints only: the problem calls this module
 #: The folds a free omega_k's start is chosen among (within omega_bounds): the one whose
 #: folded start best fits target k after a rigid alignment (:func:`fold_scans`, :func:`plan`).
 START_FOLDS = 41
-#: IPOPT iterations of each screening solve of a mesh's orientation (:func:`screened`).
+#: Iterations of each screening solve of a mesh's orientation (:func:`screened`).
 SCREEN_ITERATIONS = 20
 #: Largest constraint violation of a screening solve's last point that still counts.
 SCREEN_FEASIBLE = 1e-6
-#: What a solve of several states says of its solver in the result's notes.
-SOLVER_NOTE = ("several states are solved by IPOPT on the simultaneous transcription of "
-               "every state (Levenberg-Marquardt designs one state)")
 
 
 def refuse_options(problem: DesignProblem, options: SolveOptions,
@@ -84,32 +82,31 @@ def solve_states(problem: DesignProblem, options: SolveOptions, first: Start, *,
                  verbose: bool = False) -> DesignResult:
     """Solve ``problem`` (several targets) with ``options`` from ``first``, the start of
     :func:`first_problem`: the plan of :func:`plan` (each mesh's orientation screened,
-    :func:`screened`), every continuation stage's NLP of all states solved by IPOPT (the
-    solver named by ``options`` is recorded as "ipopt", :data:`SOLVER_NOTE`), the answer
-    re-marched, checked and measured state by state (:func:`result`). Iterations count the
-    screening solves too."""
+    :func:`screened`), every continuation stage's NLP of all states solved by
+    ``options.solver`` (:func:`.solvers.handover.solve`), the answer re-marched, checked
+    and measured state by state (:func:`result`). Iterations count the screening solves
+    too."""
     problem.check_reachable()
-    run = Run(replace(options, solver="ipopt"), callback=callback, verbose=verbose)
+    run = Run(options, callback=callback, verbose=verbose)
     chosen, notes = screened(problem, first, run)
     nlp, outcome = _solve_plan(problem, chosen, run)
     stats = run.stats(outcome)
     if not outcome.success:
         raise_failure(nlp, outcome, stats, run.iterations)
-    notes = ((SOLVER_NOTE,) if options.solver == LM else ()) + notes
     return result(problem, nlp, chosen, outcome.x, stats, run.options, notes)
 
 
 def _solve_plan(problem: DesignProblem, plan: Plan, run: Run,
                 stages: tuple[float, ...] | None = None) -> tuple[transcription.NLP, Outcome]:
-    """The continuation ``stages`` (default ``run.options``') of one plan by IPOPT, each
-    from the last one's answer."""
+    """The continuation ``stages`` (default ``run.options``') of one plan, each from the
+    last one's answer."""
     x = None
     for factor in run.options.continuation if stages is None else stages:
         t1 = time.perf_counter()
         nlp = transcribe_states(problem, plan, problem.stage_weights(factor))
         run.build_time += time.perf_counter() - t1
-        outcome = ipopt.solve(nlp, nlp.x0 if x is None else x, run, panels=problem.panels,
-                              warm=x is not None)
+        outcome = handover.solve(nlp, nlp.x0 if x is None else x, run, panels=problem.panels,
+                                 warm=x is not None)
         x = outcome.x
         if not outcome.success:
             break
@@ -161,7 +158,7 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     target is a mesh or a point cloud (:class:`~rffqm_nlp.targets.meshes.Mesh`: its
     parametrization is computed, so which way its lattice runs along the pattern is
     unknown) chosen among the eight :data:`ORIENTATIONS`, state by state: the one whose
-    first continuation stage, at most :data:`SCREEN_ITERATIONS` IPOPT iterations (counted
+    first continuation stage, at most :data:`SCREEN_ITERATIONS` iterations (counted
     in ``run``, within its time limit), ends with the least loss at a point that holds the
     constraints (the identity where none does). A surface given by its parametrization is
     laid on as parametrized. Returns the plan and notes on what was chosen."""
@@ -179,10 +176,13 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
             trial_plan = plan(problem, first, {**chosen_o, k: o}, scans)
             nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
             run.iterations += trial.iterations
+            run.marched_iterations += trial.marched_iterations
+            run.restoration_iterations += trial.restoration_iterations
             run.build_time += trial.build_time
-            violation = (np.inf if outcome.g is None else
-                         float(np.max(np.maximum(nlp.lbg - outcome.g, outcome.g - nlp.ubg))))
-            scores.append(outcome.objective if violation <= SCREEN_FEASIBLE else np.inf)
+            admissible = (outcome.objective is not None if outcome.g is None  # marched
+                          else float(np.max(np.maximum(nlp.lbg - outcome.g,
+                                                       outcome.g - nlp.ubg))) <= SCREEN_FEASIBLE)
+            scores.append(outcome.objective if admissible else np.inf)
         chosen_o[k] = ORIENTATIONS[int(np.argmin(scores))]
         notes.append(f"state {k + 1}'s mesh lattice is laid on "
                      f"{_orientation_text(chosen_o[k])}, the least loss of the eight "

@@ -3,8 +3,9 @@ the solvers of each stage, the clearance rounds, and the memory it needs.
 
 Each stage transcribes the problem (:meth:`DesignProblem.transcribe`) and runs
 Levenberg-Marquardt on the marching manifold (:mod:`.solvers.levenberg_marquardt`), handing
-over to IPOPT (:mod:`.solvers.ipopt`) only where it stalls or reaches no admissible point;
-with solver "ipopt" IPOPT runs alone. The solvers share one :class:`.solvers.context.Run`.
+over to IPOPT (:mod:`.solvers.ipopt`) only where it stalls or reaches no admissible point
+(:func:`.solvers.handover.solve`); with solver "ipopt" IPOPT runs alone. The solvers share
+one :class:`.solvers.context.Run`.
 The answer is re-marched, checked and measured by :func:`.measure.result`.
 """
 
@@ -25,7 +26,7 @@ from . import clearance, measure, several, transcription
 from .multistart import solve_multistart
 from .options import CLOSED_FORM, LM, SolveOptions
 from .results import DesignResult, SolveStats
-from .solvers import ipopt, levenberg_marquardt
+from .solvers import handover
 from .solvers.closed_form import closed_form_start
 from .solvers.closed_form.prescribed import prescribed_start
 from .solvers.context import Outcome, Run, raise_failure
@@ -125,14 +126,7 @@ def _solve_stage(problem: DesignProblem, nlp: transcription.NLP, start: Start, r
     when it stalls or reaches no admissible point (from a start that breaks a constraint:
     moved toward ``reference()`` where given, else restored)."""
     run.stop = fit_reached(problem, nlp, start, run.options)
-    if run.options.solver == LM:
-        marched = levenberg_marquardt.solve(nlp, x, run, reference=reference)
-        if marched is not None and marched.status != "Stalled":
-            return marched
-        if marched is not None:
-            return ipopt.solve(nlp, marched.x, run, panels=problem.panels, warm=True,
-                               best=marched.best)
-    return ipopt.solve(nlp, x, run, panels=problem.panels, warm=warm)
+    return handover.solve(nlp, x, run, panels=problem.panels, warm=warm, reference=reference)
 
 
 def _keep_clearance(problem: DesignProblem, nlp: transcription.NLP, start: Start, run: Run,

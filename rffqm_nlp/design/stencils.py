@@ -194,6 +194,36 @@ class LocalJacobian:
                            minlength=self._structure.nnz)
 
 
+class GraphJacobian:
+    """The Jacobian (n_g x n_x, CSC) of an expression ``rows`` of ``x`` by CasADi's
+    differentiation of the whole graph, with :class:`LocalJacobian`'s interface
+    (:meth:`pattern`, and its nonzeros at x when called). For an NLP small enough that the
+    graph's Jacobian costs little to build (an NLP of several states,
+    :func:`rffqm_nlp.design.transcription.several_states`) and whose rows are not stated as
+    stencils. CasADi's sparsity is compressed by column, so its nonzeros come in CSC order."""
+
+    def __init__(self, rows: ca.MX, x: ca.MX):
+        function = ca.Function("jacobian", [x], [ca.jacobian(rows, x)])
+        colind, row = (np.array(a, dtype=np.int64) for a in function.sparsity_out(0).get_ccs())
+        self.shape = (rows.numel(), x.numel())
+        self._structure = Structure(index_array(row), colind, self.shape)
+        self._buffer, self._eval = function.buffer()
+        self._x = np.zeros(x.numel())
+        self._out = np.zeros(row.size)
+        self._buffer.set_arg(0, memoryview(self._x))
+        self._buffer.set_res(0, memoryview(self._out))
+
+    def pattern(self) -> sp.csc_matrix:
+        """The sparsity, data = 1 + the index of each nonzero."""
+        return self._structure.pattern()
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The nonzeros (nnz,) at x (n_x,)."""
+        self._x[:] = x
+        self._eval()
+        return self._out.copy()
+
+
 @dataclass(frozen=True)
 class Structure:
     """A CSC (or ``fmt`` "csr") sparsity (``indices``, ``indptr``, ``shape``) kept without

@@ -100,19 +100,7 @@ def simultaneous(setup: Setup) -> NLP:
         lbx[groups[name]] = ubx[groups[name]] = x0[groups[name]]
     unpack = ca.Function("unpack", [x], [pattern.boundary, v["omega"]])
     folded = ca.Function("folded", [x], Y)
-    position = np.full(lay.size, np.nan)
-    for name in ("A", "B"):
-        position[lay.index(name, slice(None), 0)] = -np.arange(n1)
-        position[lay.index(name, 0, slice(1, None))] = np.arange(1, m1)
-    position[lay.index("LV", slice(None), 0)] = -(np.arange(N) + 0.5)
-    position[lay.index("LH", 0, slice(None))] = np.arange(M) + 0.5
-    boundary_class = np.full(lay.size, -1, dtype=np.int64)
-    for kind, (name, rows, cols, index) in enumerate([
-            ("A", slice(None), 0, np.arange(n1)), ("B", slice(None), 0, np.arange(n1)),
-            ("A", 0, slice(1, None), np.arange(1, m1)), ("B", 0, slice(1, None), np.arange(1, m1)),
-            ("LV", slice(None), 0, np.arange(N)), ("LH", 0, slice(None), np.arange(M))]):
-        boundary_class[lay.index(name, rows, cols)] = 2 * kind + index % 2
-
+    position, boundary_class = boundary_places(lay, N, M)
     lengths = np.zeros(lay.size, dtype=bool)
     for name in ("LH", "LV", "Yx", "Yy", "Yz", "P"):
         lengths[lay.slices[name]] = True
@@ -180,6 +168,25 @@ def state_blocks(N: int, M: int, corr: Correspondence | None) -> dict[str, tuple
     vertices = {name: (N + 1, M + 1) for name in ("Yx", "Yy", "Yz")}
     grid = {} if corr is None else {"U": corr.shape, "V": corr.shape}
     return {**quaternions, **vertices, "PHI": (N - 1, M), **grid}
+
+
+def boundary_places(lay: Layout, N: int, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """:attr:`NLP.boundary_position` and :attr:`NLP.boundary_class` (each (lay.size,)) of a
+    layout with the pattern's blocks A, B, LH, LV of an N x M-panel pattern."""
+    n1, m1 = N + 1, M + 1
+    position = np.full(lay.size, np.nan)
+    for name in ("A", "B"):
+        position[lay.index(name, slice(None), 0)] = -np.arange(n1)
+        position[lay.index(name, 0, slice(1, None))] = np.arange(1, m1)
+    position[lay.index("LV", slice(None), 0)] = -(np.arange(N) + 0.5)
+    position[lay.index("LH", 0, slice(None))] = np.arange(M) + 0.5
+    klass = np.full(lay.size, -1, dtype=np.int64)
+    for kind, (name, rows, cols, index) in enumerate([
+            ("A", slice(None), 0, np.arange(n1)), ("B", slice(None), 0, np.arange(n1)),
+            ("A", 0, slice(1, None), np.arange(1, m1)), ("B", 0, slice(1, None), np.arange(1, m1)),
+            ("LV", slice(None), 0, np.arange(N)), ("LH", 0, slice(None), np.arange(M))]):
+        klass[lay.index(name, rows, cols)] = 2 * kind + index % 2
+    return position, klass
 
 
 def bound_pattern(setup: Setup, lay: Layout, lbx: np.ndarray, ubx: np.ndarray) -> None:

@@ -11,13 +11,15 @@ import numpy as np
 
 from ...model import numpy_model
 from ...targets import shape
+from ..stencils import GraphJacobian
 from .correspondence import GRID_REGULARIZATION
 from .inputs import Setup, damping_weights
 from .lifting import MeanTree, sides_by_antidiagonal
 from .loss import design_residuals, state_residuals
 from .nlp import NLP, Layout, StateFunctions
-from .simultaneous_nlp import (bound_pattern, fold_rows, marched_blocks, pattern_blocks,
-                               pattern_groups, pattern_rows, state_blocks)
+from .simultaneous_nlp import (Projection, bound_pattern, boundary_places, fold_rows, layout,
+                               marched_blocks, pattern_blocks, pattern_groups, pattern_rows,
+                               state_blocks)
 
 #: How a target lattice's indices are laid onto the pattern's (:func:`oriented`): (swap,
 #: flip_i, flip_j), the eight symmetries of the index rectangle, the identity first.
@@ -62,8 +64,12 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float],
     The variables are the pattern's, each state's kinematics and controls, then the
     global ones, omega_k and the alignment (q_k, t_k) of each state (``parts``: local,
     global). ``states`` holds each state's Functions; ``unpack``, ``folded`` and
-    ``free_target`` are the first state's. The NLP has no stencil Jacobians: IPOPT solves
-    it (docs/several_states.md)."""
+    ``free_target`` are the first state's. Levenberg-Marquardt on the marching manifold
+    solves it as it solves one state: the design is the pattern's boundary data and each
+    state's omega, alignment and controls, the rest marched and folded state by state
+    (``project``, :class:`StatesProjection`); its Jacobians are CasADi's of the whole graph
+    (:class:`rffqm_nlp.design.stencils.GraphJacobian`), not stencils: a design of several
+    states is small (docs/several_states.md)."""
     first = setups[0]
     N, M = first.boundary.N, first.boundary.M
     K = len(setups)
@@ -133,13 +139,75 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float],
             lengths[lay.slices[name]] = True
         if name.startswith("rigid"):
             lengths[lay.slices[name].stop - 3:lay.slices[name].stop] = True
+    weights = damping_weights(first, lengths)
+    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
+                                           for n in names])
+    grids = []
+    for k, setup in enumerate(setups):
+        if setup.correspondence is not None:
+            grids.append(block(f"U{k}", f"V{k}"))
+            weights[grids[-1]] = setup.correspondence.damping_weights()
+    design = np.concatenate([*groups.values(), block(*(f"rigid{k}" for k in range(K))),
+                             *grids])
+    position, klass = boundary_places(lay, N, M)
+    residuals = ca.vertcat(*losses, *own)
     state0 = functions[0]
-    return NLP(x=x, residuals=ca.vertcat(*losses, *own), g=g, lbg=lbg, ubg=ubg, lbx=lbx,
-               ubx=ubx, x0=x0,
+    return NLP(x=x, residuals=residuals, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=ca.Function("unpack", [x], [pattern.boundary, v["omega0"]]),
-               folded=state0.folded, groups=groups, parts=parts,
-               damping_weights=damping_weights(first, lengths), free_target=state0.target,
-               states=tuple(functions))
+               folded=state0.folded, groups=groups, parts=parts, damping_weights=weights,
+               free_target=state0.target, states=tuple(functions),
+               project=StatesProjection(setups, lay, tree, start.sigma),
+               design_index=design, pattern_index=block("A", "B", "LH", "LV"),
+               boundary_position=position, boundary_class=klass,
+               r_jacobian=GraphJacobian(residuals, x), g_jacobian=GraphJacobian(g, x))
+
+
+class StatesProjection:
+    """:attr:`NLP.project` of :func:`several_states`: x (n,) -> the point of x's boundary
+    data, each state's omega, alignment and controls, the pattern marched and folded into
+    every state; None where a state's :class:`.simultaneous_nlp.Projection` is None. Each
+    state has the Projection of a one-state layout (:func:`.simultaneous_nlp.layout`),
+    whose blocks are copied from and into x's by name (the pattern marched once a state)."""
+
+    def __init__(self, setups: Sequence[Setup], lay: Layout, tree: MeanTree,
+                 sigma: np.ndarray):
+        N, M = sigma.shape[0] - 1, sigma.shape[1] - 1
+        pattern = set(pattern_blocks(N, M, tree))
+        self._states = []
+        for k, setup in enumerate(setups):
+            single = layout(N, M, tree, setup.correspondence)
+            xs = ca.MX.sym("x", single.size)
+            grid = (np.concatenate([np.arange(single.size)[single.slices[n]]
+                                    for n in ("U", "V")])
+                    if setup.correspondence is not None else np.zeros(0, dtype=np.int64))
+            names = list(single.shapes)
+            written = [n for n in names if (n not in pattern or k == 0)
+                       and n not in ("omega", "rigid", "U", "V")]
+            self._states.append((Projection(xs, single.views(xs), single, sigma, tree, grid),
+                                 single.size, _indices(single, lay, names, k),
+                                 _indices(single, lay, written, k)))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray | None:
+        out = np.array(x, dtype=float)
+        for project, size, (into, read), (mine, written) in self._states:
+            xs = np.zeros(size)
+            xs[into] = x[read]
+            point = project(xs)
+            if point is None:
+                return None
+            out[written] = point[mine]
+        return out
+
+
+def _indices(single: Layout, lay: Layout, names: Sequence[str], k: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The indices of the blocks ``names`` in a one-state layout and, in the same order,
+    of the same blocks in the layout of several states (a state's own block named with
+    its number ``k``)."""
+    ours = [np.arange(single.size)[single.slices[n]] for n in names]
+    theirs = [np.arange(lay.size)[lay.slices[n if n in lay.slices else f"{n}{k}"]]
+              for n in names]
+    return np.concatenate(ours), np.concatenate(theirs)
 
 
 def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
