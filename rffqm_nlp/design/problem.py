@@ -365,21 +365,28 @@ class DesignProblem:
         return controls
 
     def correspondence_of(self, target: surfaces.Surface | Curvature | None = None,
-                          swap: bool = False) -> transcription.Correspondence | None:
+                          swap: bool = False, controls: int | None = None
+                          ) -> transcription.Correspondence | None:
         """The free correspondence from the uniform grid onto ``target`` (default the
         problem's first), of the lattice's shape ((M+1, N+1) with ``swap``, whose
-        transpose lies on the pattern: :func:`rffqm_nlp.design.transcription.oriented`);
-        None with "lattice", and for a curvature target, which prescribes no positions."""
+        transpose lies on the pattern: :func:`rffqm_nlp.design.transcription.oriented`),
+        with ``controls`` a side (default
+        :data:`~rffqm_nlp.design.transcription.GRID_CONTROLS`); None with "lattice", and
+        for a curvature target, which prescribes no positions."""
         target = self.target if target is None else target
         if self.correspondence != "free" or isinstance(target, Curvature):
             return None
         shape = (self.M + 1, self.N + 1) if swap else (self.N + 1, self.M + 1)
         return transcription.Correspondence.uniform(target.casadi_function(), target.domain,
-                                                    shape)
+                                                    shape, controls)
 
     def grid(self, result: DesignResult) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid (U, V), each (N+1, M+1), of a free correspondence at ``result`` (a
-        result of this problem, read from its design vector); None with "lattice"."""
+        result of this problem, read from its design vector); None with "lattice". A
+        design of several states has a grid per state and is refused."""
+        if self.several:
+            raise InputError("grid() reads the one grid of a design of one state; this "
+                             "problem has several targets")
         corr = self.correspondence_of()
         if corr is None:
             return None

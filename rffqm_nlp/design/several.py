@@ -5,6 +5,7 @@ result with one :class:`~rffqm_nlp.design.results.State` per target."""
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable
@@ -30,9 +31,13 @@ if TYPE_CHECKING:  # for type hints only: the problem calls this module
 #: folded start best fits target k after a rigid alignment (:func:`fold_scans`, :func:`plan`).
 START_FOLDS = 41
 #: Iterations of each screening solve of a mesh's orientation (:func:`screened`).
-SCREEN_ITERATIONS = 20
+SCREEN_ITERATIONS = 10
 #: Largest constraint violation of a screening solve's last point that still counts.
 SCREEN_FEASIBLE = 1e-6
+#: Controls a side of each state's free correspondence: more than one state's
+#: (:data:`~rffqm_nlp.design.transcription.GRID_CONTROLS`), since one pattern no longer
+#: bends to each mesh's parametrization (docs/several_states.md, "Which way a mesh runs").
+STATE_GRID_CONTROLS = 6
 
 
 def refuse_options(problem: DesignProblem, options: SolveOptions,
@@ -133,61 +138,74 @@ def plan(problem: DesignProblem, first: Start,
          scans: dict[int, tuple[np.ndarray, list[np.ndarray]]] | None = None) -> Plan:
     """The start of every state, its target lattice laid on in ``orientations[k]``
     (default the identity): ``first`` (the start of :func:`first_problem`) for the
-    pattern; each further state at whichever of its folds (:func:`fold_scans`, given as
+    pattern and the first state (its lattice, where laid on otherwise, aligned onto at
+    its fold); each further state at whichever of its folds (:func:`fold_scans`, given as
     ``scans`` or computed) brings the start's coarse lattice closest to its target lattice
     after a rigid alignment (Kabsch), aligned onto it."""
     orientations = orientations or {}
     scans = scans or fold_scans(problem, first)
-    states, laid = [first], [ORIENTATIONS[0]]
-    for k, target in enumerate(problem.other_targets, start=1):
+    states, laid = [], []
+    for k, target in enumerate(problem.targets):
         o = orientations.get(k, ORIENTATIONS[0])
+        laid.append(o)
+        if k == 0 and o == ORIENTATIONS[0]:
+            states.append(first)
+            continue
         lattice = oriented(target.lattice(problem.M, problem.N) if o[0]
                            else target.lattice(problem.N, problem.M), o)
-        folds, coarse = scans[k]
+        folds, coarse = scans[k] if k else (np.array([first.omega]), [shape.coarse_grain(
+            numpy_model.fold(numpy_model.march(first.boundary), first.omega))])
         best = int(np.argmin([shape.kabsch(c, lattice)[2] for c in coarse]))
         R, t, _ = shape.kabsch(coarse[best], lattice)
         s_i, s_j = surfaces.mean_neighbour_distances(lattice)
         states.append(replace(first, omega=float(folds[best]), target_points=lattice,
                               spacing=0.5 * (s_i + s_j), rotation=R, translation=t))
-        laid.append(o)
     return Plan(reference=first, states=tuple(states), orientations=tuple(laid))
 
 
 def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tuple[str, ...]]:
-    """:func:`plan` from ``first`` with the orientation of every further state whose
-    target is a mesh or a point cloud (:class:`~rffqm_nlp.targets.meshes.Mesh`: its
-    parametrization is computed, so which way its lattice runs along the pattern is
-    unknown) chosen among the eight :data:`ORIENTATIONS`, state by state: the one whose
-    first continuation stage, at most :data:`SCREEN_ITERATIONS` iterations (counted
-    in ``run``, within its time limit), ends with the least loss at a point that holds the
-    constraints (the identity where none does). A surface given by its parametrization is
-    laid on as parametrized. Returns the plan and notes on what was chosen."""
-    chosen_o: dict[int, tuple[bool, bool, bool]] = {}
-    notes = []
+    """:func:`plan` from ``first`` with the orientation of every state whose target is a
+    mesh or a point cloud (:class:`~rffqm_nlp.targets.meshes.Mesh`: its parametrization
+    is computed, so which way its lattice runs along the pattern is unknown) chosen among
+    the eight :data:`ORIENTATIONS`: the first state's jointly with the next mesh state's
+    (64 pairs; the pattern's Miura start has a direction, so the first state's matters
+    too), every later one's given those chosen before it. The orientation that wins is
+    the one whose first continuation stage, at most :data:`SCREEN_ITERATIONS` iterations
+    (counted in ``run``, within its time limit), ends with the least loss at a point that
+    holds the constraints (the identity where none does). A surface given by its
+    parametrization is laid on as parametrized. Returns the plan and notes on what was
+    chosen."""
+    meshes = [k for k, target in enumerate(problem.targets)
+              if isinstance(target, surfaces.Mesh)]
+    groups = [tuple(meshes[:2])] + [(k,) for k in meshes[2:]] if 0 in meshes else \
+        [(k,) for k in meshes]
+    chosen: dict[int, tuple[bool, bool, bool]] = {}
     scans = fold_scans(problem, first)
-    for k, target in enumerate(problem.other_targets, start=1):
-        if not isinstance(target, surfaces.Mesh):
-            continue
-        scores = []
-        for o in ORIENTATIONS:
-            left = (None if run.deadline is None
-                    else max(run.deadline - time.perf_counter(), 1e-3))
-            trial = Run(replace(run.options, max_iter=SCREEN_ITERATIONS, time_limit=left))
-            trial_plan = plan(problem, first, {**chosen_o, k: o}, scans)
-            nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
-            run.iterations += trial.iterations
-            run.marched_iterations += trial.marched_iterations
-            run.restoration_iterations += trial.restoration_iterations
-            run.build_time += trial.build_time
-            admissible = (outcome.objective is not None if outcome.g is None  # marched
-                          else float(np.max(np.maximum(nlp.lbg - outcome.g,
-                                                       outcome.g - nlp.ubg))) <= SCREEN_FEASIBLE)
-            scores.append(outcome.objective if admissible else np.inf)
-        chosen_o[k] = ORIENTATIONS[int(np.argmin(scores))]
-        notes.append(f"state {k + 1}'s mesh lattice is laid on "
-                     f"{_orientation_text(chosen_o[k])}, the least loss of the eight "
-                     f"orientations screened")
-    return plan(problem, first, chosen_o, scans), tuple(notes)
+    for group in groups:
+        candidates = list(itertools.product(ORIENTATIONS, repeat=len(group)))
+        scores = [_screen(problem, plan(problem, first, {**chosen, **dict(zip(group, c))},
+                                        scans), run) for c in candidates]
+        chosen.update(zip(group, candidates[int(np.argmin(scores))]))
+    notes = tuple(f"state {k + 1}'s mesh lattice is laid on {_orientation_text(chosen[k])}, "
+                  f"the least loss of the orientations screened" for k in meshes)
+    return plan(problem, first, chosen, scans), notes
+
+
+def _screen(problem: DesignProblem, trial_plan: Plan, run: Run) -> float:
+    """The loss of ``trial_plan``'s first continuation stage cut at
+    :data:`SCREEN_ITERATIONS` iterations (counted in ``run``, within its time limit); inf
+    where its last point breaks a constraint."""
+    left = None if run.deadline is None else max(run.deadline - time.perf_counter(), 1e-3)
+    trial = Run(replace(run.options, max_iter=SCREEN_ITERATIONS, time_limit=left))
+    nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
+    run.iterations += trial.iterations
+    run.marched_iterations += trial.marched_iterations
+    run.restoration_iterations += trial.restoration_iterations
+    run.build_time += trial.build_time
+    admissible = (outcome.objective is not None if outcome.g is None  # marched
+                  else float(np.max(np.maximum(nlp.lbg - outcome.g,
+                                               outcome.g - nlp.ubg))) <= SCREEN_FEASIBLE)
+    return outcome.objective if admissible else np.inf
 
 
 def _orientation_text(orientation: tuple[bool, bool, bool]) -> str:
@@ -217,7 +235,8 @@ def transcribe_states(problem: DesignProblem, plan: Plan,
             omega_bounds=problem.omega_bounds if omega is None else (omega, omega),
             fixed=problem.fix, reference=reference.boundary,
             reference_omega=reference.omega,
-            correspondence=problem.correspondence_of(target, swap=o[0]),
+            correspondence=problem.correspondence_of(target, swap=o[0],
+                                                     controls=STATE_GRID_CONTROLS),
             curvature=(transcription.CurvatureLoss.of(target, problem.N, problem.M, own)
                        if isinstance(target, Curvature) else None)))
         state_weights.append(weight)
