@@ -333,8 +333,11 @@ def test_a_curvature_target_and_a_surface_share_one_nlp():
 
 def test_a_study_of_several_targets_sweeps_design_keys(tmp_path):
     """A study whose base has two [[target]] tables: each design is one sheet of two
-    states, its result keeps both, the table's fit columns are the first state's; a target
-    key or an inline [target] is refused in one line."""
+    states, its result keeps both, the table's fit columns are the first state's and each
+    state has its own columns (state1_omega, state2_omega, state2_rms, ...); a re-run
+    keeps them; a target key or an inline [target] is refused in one line."""
+    import pandas as pd
+
     from typer.testing import CliRunner
 
     from rffqm_nlp.cli import app
@@ -350,10 +353,23 @@ def test_a_study_of_several_targets_sweeps_design_keys(tmp_path):
     assert res.exit_code == 0, res.output
     rows = (out / "results.csv").read_text().splitlines()
     assert len(rows) == 3 and all(",solved," in row for row in rows[1:])
+    table = pd.read_parquet(out / "results.parquet").set_index("id")
+    assert list(table.columns[-len(rq.sweeps.STATE_COLUMNS) - 1:]) == [
+        "state1_omega", *(f"state2_{c}" for c in rq.sweeps.STATE_COLUMNS)]
+    assert table["state2_collision_free"].dtype == "boolean"
     for folder in (out / "designs").iterdir():
         result = rq.DesignResult.load(folder)
         assert len(result.states) == 2 and result.states[1].omega == 2.4
         assert f"{result.fit.rms!r}" in "".join(rows)
+        row = table.loc[folder.name]
+        assert row["state1_omega"] == result.omega and row["state2_omega"] == 2.4
+        assert row["state2_rms"] == result.states[1].fit.rms
+        assert row["rms"] == result.fit.rms
+    again = CliRunner().invoke(app, ["sweep", str(study), "--out", str(out),
+                                     "--scheduler", "none"])
+    assert again.exit_code == 0 and "2 of 2 designs already complete" in again.output
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "results.parquet").set_index("id"),
+                                  table)
     for text, message in (('"target.radius" = [1.0, 2.0]', "sets a target"),
                           ('"design.alpha0" = [1.0, 1.1]\n\n[target]\nradius = 3.0',
                            "cannot be set by a study")):

@@ -59,8 +59,8 @@ from __future__ import annotations
 from .limits import MAX_DEPTH, MAX_DESIGNS, MAX_INDEX, MAX_LABEL, MAX_PARAMETERS, MAX_WHOLE
 from .names import design_id
 from .outcomes import (DESIGNS_DIR, FIT_COLUMNS, FLAG_COLUMNS, KEPT_ROW_STATUSES,
-                       OUTCOME_COLUMNS, ROW_FILE, ROW_FORMAT, ROW_VERSION, completed_row,
-                       save_outcome)
+                       OUTCOME_COLUMNS, ROW_FILE, ROW_FORMAT, ROW_VERSION, STATE_COLUMNS,
+                       completed_row, save_outcome, state_columns)
 from .results_table import CSV_FORMULA_STARTS, TABLE_NAME, csv_frame, csv_text, table, write_table
 from .running import WORKER_ENV, Task, run
 from .schema import (CASE_NAME, INTEGER_KEYS, RANGE_KEYS, STUDY_FILE_KEYS, SWEEP_CONTROLS,
@@ -71,7 +71,9 @@ from .task import one_thread, solve_design
 __all__ = ["CASE_NAME", "CSV_FORMULA_STARTS", "DESIGNS_DIR", "FIT_COLUMNS", "FLAG_COLUMNS",
            "INTEGER_KEYS", "KEPT_ROW_STATUSES", "MAX_DEPTH", "MAX_DESIGNS", "MAX_INDEX",
            "MAX_LABEL", "MAX_PARAMETERS", "MAX_WHOLE", "OUTCOME_COLUMNS", "RANGE_KEYS",
-           "ROW_FILE", "ROW_FORMAT", "ROW_VERSION", "STUDY_FILE_KEYS", "SWEEP_CONTROLS",
+           "ROW_FILE", "ROW_FORMAT", "ROW_VERSION", "STATE_COLUMNS", "STUDY_FILE_KEYS",
+           "SWEEP_CONTROLS",
            "TABLES", "TABLE_NAME", "WORKER_ENV", "Design", "Range", "Study", "Task",
            "completed_row", "csv_frame", "csv_text", "design_config", "design_id",
-           "one_thread", "run", "save_outcome", "solve_design", "table", "write_table"]
+           "one_thread", "run", "save_outcome", "solve_design", "state_columns", "table",
+           "write_table"]

@@ -24,6 +24,10 @@ FLAG_COLUMNS = tuple(f.name for f in dataclasses.fields(Fit) if str(f.type).star
 #: Outcome columns of every row, after id, name, case and the swept parameters.
 OUTCOME_COLUMNS = ("status", "solver_status", "reason", *FIT_COLUMNS, "iterations", "start",
                    "build_time", "solve_time", "time", "worker", "host")
+#: Columns of each state of a design of several states (docs/several_states.md), named
+#: ``state{k}_{column}`` (k from 1): its omega, and from the second state on its Fit; the
+#: plain Fit columns are the first state's.
+STATE_COLUMNS = ("omega", *FIT_COLUMNS)
 #: Statuses of finished designs that a re-run keeps; "error" and "worker_lost" are retried.
 KEPT_ROW_STATUSES = ("solved", "infeasible", "failed")
 DESIGNS_DIR = "designs"
@@ -32,11 +36,44 @@ ROW_FORMAT = "rffqm-nlp sweep row"
 ROW_VERSION = 1
 
 
+def states_of(config: Mapping[str, Any]) -> int:
+    """The number of folded states a design's configuration asks for: one per [[target]]
+    table (one for a single [target])."""
+    target = config.get("target")
+    return len(target) if isinstance(target, list) else 1
+
+
+def state_columns(states: int) -> tuple[str, ...]:
+    """The per-state columns of a design of ``states`` states (none for one state):
+    ``state1_omega``, then each further state's :data:`STATE_COLUMNS`."""
+    if states < 2:
+        return ()
+    return ("state1_omega", *(f"state{k}_{column}" for k in range(2, states + 1)
+                              for column in STATE_COLUMNS))
+
+
+def state_values(result: DesignResult) -> dict[str, Any]:
+    """The per-state columns of ``result`` (:func:`state_columns`) with their values."""
+    if len(result.states) < 2:
+        return {}
+    values: dict[str, Any] = {"state1_omega": result.states[0].omega}
+    for k, state in enumerate(result.states[1:], start=2):
+        values[f"state{k}_omega"] = state.omega
+        values.update({f"state{k}_{key}": value for key, value in state.fit.to_dict().items()})
+    return values
+
+
+def row_columns(config: Mapping[str, Any]) -> tuple[str, ...]:
+    """The columns of the row of a design of ``config``: :data:`OUTCOME_COLUMNS`, then
+    its per-state columns."""
+    return OUTCOME_COLUMNS + state_columns(states_of(config))
+
+
 def save_outcome(folder: Path, design: Design, outcome: Mapping[str, Any]) -> dict[str, Any]:
     """Write a design's folder (result.json when solved, then row.json) and return its
     table row."""
     folder.mkdir(parents=True, exist_ok=True)
-    row = {column: outcome["row"].get(column) for column in OUTCOME_COLUMNS}
+    row = {column: outcome["row"].get(column) for column in row_columns(design.config)}
     if outcome.get("result") is not None:
         DesignResult.from_dict(outcome["result"]).save(folder)
     record = {"format": ROW_FORMAT, "version": ROW_VERSION, "id": design.id,
@@ -54,7 +91,7 @@ def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
         if (record.get("format") != ROW_FORMAT or record.get("version") != ROW_VERSION
                 or record.get("id") != design.id or design_id(record["config"]) != design.id):
             return None
-        row = {column: record["row"][column] for column in OUTCOME_COLUMNS}
+        row = {column: record["row"][column] for column in row_columns(design.config)}
     except (ValueError, KeyError, TypeError, AttributeError):   # InputError is a ValueError
         return None
     if row["status"] not in KEPT_ROW_STATUSES:
@@ -68,7 +105,9 @@ def completed_row(folder: Path, design: Design) -> dict[str, Any] | None:
         try:
             if (canonical(result.problem) != canonical(design.config)
                     or result.folded.shape != (N + 1, M + 1, 3)
-                    or result.fit.to_dict() != {k: row[k] for k in FIT_COLUMNS}):
+                    or result.fit.to_dict() != {k: row[k] for k in FIT_COLUMNS}
+                    or state_values(result) != {k: row[k] for k in
+                                                state_columns(states_of(design.config))}):
                 return None
         except (TypeError, ValueError, AttributeError):
             return None

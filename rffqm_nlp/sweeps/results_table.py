@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..files import atomic_path
-from .outcomes import FIT_COLUMNS, FLAG_COLUMNS, OUTCOME_COLUMNS
+from .outcomes import FIT_COLUMNS, FLAG_COLUMNS, OUTCOME_COLUMNS, state_columns, states_of
 from .study import Design, Study
 
 if TYPE_CHECKING:
@@ -28,10 +28,12 @@ CSV_FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r", "\n", "\uff1d", "\uff0b", 
 def table(study: Study, designs: list[Design], rows: Mapping[str, Mapping[str, Any]]
           ) -> "pd.DataFrame":
     """The results table: one row per finished design, in study order; columns id, name,
-    case (when the study has cases), the swept keys, then :data:`OUTCOME_COLUMNS`."""
+    case (when the study has cases), the swept keys, then :data:`OUTCOME_COLUMNS` and, for
+    a base of several states, each state's (:func:`.outcomes.state_columns`)."""
     import pandas as pd
 
     swept = study.swept
+    states = state_columns(states_of(study.base))
     records = []
     for design in designs:
         if design.id not in rows:
@@ -42,12 +44,14 @@ def table(study: Study, designs: list[Design], rows: Mapping[str, Mapping[str, A
         record.update({key: _cell(design.params.get(key)) for key in swept})
         record.update(rows[design.id])
         records.append(record)
-    columns = ["id", "name", *(["case"] if study.cases else []), *swept, *OUTCOME_COLUMNS]
+    columns = ["id", "name", *(["case"] if study.cases else []), *swept, *OUTCOME_COLUMNS,
+               *states]
     frame = pd.DataFrame.from_records(records, columns=columns)
     for key in swept:
         frame[key] = _homogeneous(frame[key])
-    for column in FIT_COLUMNS + ("build_time", "solve_time", "time"):
-        frame[column] = frame[column].astype("boolean" if column in FLAG_COLUMNS
+    for column in FIT_COLUMNS + ("build_time", "solve_time", "time") + states:
+        flag = column.split("_", 1)[1] if column in states else column
+        frame[column] = frame[column].astype("boolean" if flag in FLAG_COLUMNS
                                              else "float64")
     for column in ("iterations", "start"):
         frame[column] = frame[column].astype("Int64")

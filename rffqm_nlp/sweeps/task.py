@@ -15,6 +15,7 @@ from threadpoolctl import OpenBLASController, register, threadpool_limits
 from ..design import from_config as problem_from_config
 from ..design.results import SolveStats
 from ..errors import InfeasibleDesign, SolverFailed, one_line
+from .outcomes import state_values
 
 
 def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
@@ -49,7 +50,8 @@ def solve_design(payload: Mapping[str, Any]) -> dict[str, Any]:
     else:
         multistart = result.stats.multistart or {}
         row.update(status="solved", solver_status=result.stats.status, reason="",
-                   **result.fit.to_dict(), **_stat_columns(result.stats),
+                   **result.fit.to_dict(), **state_values(result),
+                   **_stat_columns(result.stats),
                    start=multistart.get("chosen", 0))
     row["time"] = time.perf_counter() - t0
     return {"row": row, "result": None if result is None else result.to_dict()}
