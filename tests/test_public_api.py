@@ -36,6 +36,7 @@ PUBLIC = [
     "shape.lattice_area",
     # design, results, sweeps
     "design.from_config", "results.Fit", "sweeps.run", "sweeps.Study", "sweeps.FIT_COLUMNS",
+    "sweeps.STATE_COLUMNS",
     "sweeps.MAX_DESIGNS", "sweeps.csv_frame",
     "ipopt_options.OPTIONS", "ipopt_options.check_ipopt_options",
     # making a design (rq.make is the package, called as its function)

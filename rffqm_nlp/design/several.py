@@ -177,8 +177,9 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     chosen."""
     meshes = [k for k, target in enumerate(problem.targets)
               if isinstance(target, surfaces.Mesh)]
-    groups = [tuple(meshes[:2])] + [(k,) for k in meshes[2:]] if 0 in meshes else \
-        [(k,) for k in meshes]
+    groups = [(k,) for k in meshes]
+    if 0 in meshes:  # the first state's orientation, jointly with the next mesh state's
+        groups = [tuple(meshes[:2])] + groups[2:]
     chosen: dict[int, tuple[bool, bool, bool]] = {}
     scans = fold_scans(problem, first)
     for group in groups:
