@@ -381,6 +381,15 @@ def test_perturb_angles_keeps_taking_generators_and_none():
     assert rq.perturb_angles(bd, 0.01, seed=np.int64(7)).N == 2
 
 
+@pytest.mark.parametrize("zero", [0.0, -0.0, np.float64(-0.0)])
+def test_perturb_angles_by_zero_keeps_the_boundary(zero):
+    """A zero amplitude (signed too, which NumPy's uniform refuses) perturbs nothing."""
+    bd = rq.miura_boundary(2, 2)
+    same = rq.perturb_angles(bd, zero, seed=3)
+    np.testing.assert_array_equal(same.left, bd.left)
+    np.testing.assert_array_equal(same.bottom, bd.bottom)
+
+
 def test_march_and_fold_refuse_the_wrong_objects_and_unfoldable_patterns():
     bd = rq.miura_boundary(2, 2)
     pat = mg.march(bd)

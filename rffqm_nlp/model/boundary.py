@@ -264,8 +264,8 @@ def perturb_angles(bd: BoundaryData, amplitude: float = 0.05 * np.pi,
     [0, 2^63 - 1] nor a numpy Generator.
     """
     check_boundary(bd)
-    amplitude = check_value(amplitude, Key("number", low=0.0, hint="(an angle, radians)"),
-                               "amplitude")
+    amplitude = abs(check_value(amplitude, Key("number", low=0.0, hint="(an angle, radians)"),
+                                "amplitude"))  # -0.0 passes the check; NumPy's uniform refuses it
     if seed is not None and not isinstance(seed, np.random.Generator):
         seed = check_value(seed, _SEED, "seed")
     rng = np.random.default_rng(seed)
