@@ -423,12 +423,13 @@ def test_coarse_rows_hold_every_contact_of_a_fine_scan(make, seed, clearance, om
 def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance, omega_max,
                                                           monkeypatch):
     """With a small ROWS, every chunk of broad-phase rows and every batch the refinement
-    evaluates (two states per row) holds at most ROWS pairs, there are many of them, and
-    the report is the one of a single chunk."""
+    evaluates (bounds at one state per row, exact distances at two) holds at most ROWS
+    pairs (2 ROWS for the distances), there are many of them, and the report is the one
+    of a single chunk."""
     pat = make(seed)
     whole = collisions(pat, omega_max, clearance=clearance)
-    chunks, batches = [], []
-    coarse, per_state = broad.coarse_rows, motion.per_state
+    chunks, batches, per_row = [], [], []
+    coarse, per_state, in_batches = broad.coarse_rows, motion.per_state, motion._in_batches
 
     def counted_rows(*args):
         for rows, m in coarse(*args):
@@ -439,12 +440,17 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
         batches.append(len(s))
         return per_state(f, st, s, p, q)
 
+    def counted_in_batches(f, st, *index):
+        per_row.append(len(index[0]))
+        return in_batches(f, st, *index)
+
     monkeypatch.setattr(broad, "ROWS", 8)
     monkeypatch.setattr(broad, "coarse_rows", counted_rows)
     monkeypatch.setattr(motion, "per_state", counted_per_state)
+    monkeypatch.setattr(motion, "_in_batches", counted_in_batches)
     chunked = collisions(pat, omega_max, clearance=clearance)
     assert chunked == whole and not whole.free
-    assert max(chunks) <= 8 and max(batches) <= 2 * 8
+    assert max(chunks) <= 8 and max(batches) <= 2 * 8 and max(per_row) <= 8
     assert len(chunks) > 3 * int(np.ceil(omega_max / motion.MAX_STEP))
 
 

@@ -82,8 +82,9 @@ class Step:
     its broad phase reads: the panels' centres ``C`` (3, P) at a, their displacements ``D``
     (3, P) to b, their ``spin`` (P,) (largest vertex displacement about the centre), their
     reaches ``G`` (P,) (:func:`reach`), the ``clearance`` and ``eps``, a bound on the
-    rounding of the gaps and displacements (:func:`_slack`); ``radius`` the median panel
-    radius."""
+    rounding of the gaps and displacements (:func:`_slack`); ``spread`` the median reach
+    over the median panel radius (:meth:`far` reads it once a step for the halving and
+    once for the tiles)."""
 
     a: int
     b: int
@@ -93,12 +94,12 @@ class Step:
     G: np.ndarray
     clearance: float
     eps: float
-    radius: float
+    spread: float
 
     def far(self, times: float) -> bool:
         """Whether the median reach exceeds ``times`` the median panel radius: how far the
         step's motion is from one affine map, in panels."""
-        return bool(np.median(self.G) > times * self.radius)
+        return self.spread > times
 
 
 def step(geo: Geometry, st: States, a: int, b: int, clearance: float) -> Step:
@@ -109,7 +110,8 @@ def step(geo: Geometry, st: States, a: int, b: int, clearance: float) -> Step:
     spin = most_of(list(np.sqrt(dQ[0] ** 2 + dQ[1] ** 2 + dQ[2] ** 2)))   # (P,)
     G = reach(C, D, spin, geo.radius, clearance)
     eps = _slack(geo, np.stack([C, end.centre])) + 1e-5 * float(G.max())
-    return Step(a, b, C, D, spin, G, clearance, eps, float(np.median(geo.radius)))
+    return Step(a, b, C, D, spin, G, clearance, eps,
+                float(np.median(G)) / geo.median_radius)
 
 
 def coarse_rows(geo: Geometry, st: States, s: Step):

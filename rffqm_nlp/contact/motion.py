@@ -17,9 +17,13 @@
   panels hinged across a very thin panel, as in side-length LP patterns, which stay
   close while their far corners move a lot but hardly move in one another's frame), the
   vertex pairs only where it has not. Distances are first bounded from below cheaply
-  (:func:`~rffqm_nlp.contact.narrow.lower_bound`); the exact distance is computed only
-  where that bound does not certify the step, and only an exact distance reports a
-  contact.
+  (:func:`~rffqm_nlp.contact.narrow.lower_bound`): at a step's start, and at its end
+  only where the start's bound less m does not clear the clearance (d >= d(w0) - m all
+  over the step, which then certifies it: most pairs get one bound a state, as the start
+  of their next step, with no sort to find the rows that share a state); a half step
+  takes its parent's distance at the end it shares with it and a cheap bound at the
+  midpoint. The exact distance is computed only where those bounds do not certify the
+  step, and only an exact distance reports a contact.
 * Uncertified pairs are followed into the halves of the step (one batched fold per
   level) until they are certified, touch at a sample (d <= clearance), or the step is
   shorter than ``tol``; contacts after the earliest one found are dropped on the way.
@@ -140,23 +144,26 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
     change of their distance (inf: none yet), into the halves of their steps until each
     is certified clear, in contact at a sample, or shorter than ``tol``; contacts go to
     ``found``, rows that start after its earliest contact are dropped. In batches of at
-    most ROWS rows (a stack of the halves still to follow)."""
-    stack = [(rows, m)]
+    most ROWS rows (a stack of the halves still to follow, each with lower bounds on its
+    distance at both ends: its parent's exact distance at the end it shares with it, the
+    cheap bound at the midpoint)."""
+    stack = [(rows, m, None)]
     while stack:
-        rows, m = stack.pop()
+        rows, m, ends = stack.pop()
         if len(rows) > broad.ROWS:
-            stack.append((rows[broad.ROWS:], m[broad.ROWS:]))
+            stack.append((rows[broad.ROWS:], m[broad.ROWS:],
+                          None if ends is None else ends[broad.ROWS:]))
             rows, m = rows[:broad.ROWS], m[:broad.ROWS]
+            ends = None if ends is None else ends[:broad.ROWS]
         omegas = np.asarray(st.omegas)
         keep = omegas[rows[:, 0]] <= found.best
         rows, m = rows[keep], m[keep]
         if not rows.size:
             continue
         ia, ib, p, q = rows.T
-        wa, wb, n = omegas[ia], omegas[ib], len(rows)
-        d = per_state(lower_bound, st, np.concatenate([ia, ib]), np.tile(p, 2),
-                      np.tile(q, 2))
-        da, db = d[:n], d[n:]
+        wa, wb = omegas[ia], omegas[ib]
+        da, db = (_end_bounds(st, rows, m, clearance) if ends is None
+                  else (ends[keep, 0].copy(), ends[keep, 1].copy()))
         loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
         for bound in (frame_bound, pair_bound):      # m is SAFETY times the smaller at last
             new = SAFETY * _in_batches(bound, st, ia[loose], ib[loose], p[loose], q[loose])
@@ -172,7 +179,27 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
         open_ = ((da + db - m) / 2 <= clearance) & (da > clearance) & (wb - wa > tol)
         if open_.any():
             halves = _split(rows[open_], st)
-            stack.append((halves, np.full(len(halves), np.inf)))
+            n = int(open_.sum())
+            mid = _in_batches(lower_bound, st, halves[:n, 1], halves[:n, 2], halves[:n, 3])
+            ends = np.concatenate([np.stack([da[open_], mid], axis=1),
+                                   np.stack([mid, db[open_]], axis=1)])
+            stack.append((halves, np.full(len(halves), np.inf), ends))
+
+
+def _end_bounds(st: States, rows: np.ndarray, m: np.ndarray,
+                clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lower bounds (da, db) (n,) on the distances of the rows' (n, 4) pairs at the start
+    and the end of their steps, m (n,) the rows' bounds on the change of the distance over
+    the step: at the start the cheap bound (:func:`~rffqm_nlp.contact.narrow.lower_bound`);
+    at the end da - m where that exceeds the clearance (the distance changes by at most m
+    over the step, so da - m bounds it all over the step, and (da + db - m) / 2 >= da - m
+    certifies it), else the cheap bound there."""
+    ia, ib, p, q = rows.T
+    da = _in_batches(lower_bound, st, ia, p, q)
+    db = da - m
+    k = np.flatnonzero(db <= clearance)
+    db[k] = _in_batches(lower_bound, st, ib[k], p[k], q[k])
+    return da, db
 
 
 def pair_bound(st: States, ia: np.ndarray, ib: np.ndarray, p: np.ndarray,
@@ -235,8 +262,9 @@ def _distinct(code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _split(rows: np.ndarray, st: States) -> np.ndarray:
-    """Halve the steps of ``rows`` (n, 4): the child rows (2n, 4), the midpoint states
-    not yet in ``st`` added to it."""
+    """Halve the steps of ``rows`` (n, 4): the child rows (2n, 4), the n first halves
+    (a, mid) then the n second (mid, b), the midpoint states not yet in ``st`` added to
+    it."""
     first, inv = _distinct(rows[:, 0] * len(st.omegas) + rows[:, 1])
     w = np.asarray(st.omegas)
     mid = st.index((w[rows[first, 0]] + w[rows[first, 1]]) / 2)[inv]

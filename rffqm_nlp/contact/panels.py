@@ -64,8 +64,8 @@ class Geometry:
 
     ``ij`` (P, 2) the 0-based (i - 1, j - 1) of each panel; ``corners`` (P, 4) the flat
     vertex indices of a, b, c, d; ``radius`` (P,) the distance from a panel's centroid to
-    its farthest corner (constant: panels are rigid); ``scale`` the flat pattern's largest
-    extent.
+    its farthest corner (constant: panels are rigid), ``median_radius`` their median;
+    ``scale`` the flat pattern's largest extent.
     """
 
     def __init__(self, pat: Pattern):
@@ -77,6 +77,7 @@ class Geometry:
         X = pat.X.reshape(-1, 3)
         Q = X[self.corners]
         self.radius = np.linalg.norm(Q - Q.mean(axis=1, keepdims=True), axis=2).max(axis=1)
+        self.median_radius = float(np.median(self.radius))
         self.scale = float(np.ptp(X, axis=0).max()) or 1.0
 
     def states(self, omegas: np.ndarray) -> np.ndarray:
