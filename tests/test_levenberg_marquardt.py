@@ -371,6 +371,31 @@ def test_a_run_in_a_coarse_basis_goes_on_in_the_whole_design_to_its_optimum(monk
     assert fit.stats.status == "Fit_Reached" and len(refined) == 1
 
 
+def test_a_coarse_basis_is_left_once_its_loss_stops_falling(monkeypatch):
+    """In a coarse basis the run ends once its loss fell by less than BASIS_STALL of itself
+    over the last BASIS_STALL_STEPS steps, before it is optimal there, and goes on in the
+    whole design to the optimum of the run that stays in the basis to ``tol``."""
+    prob, opts = small("quarter_vase", panels=(16, 16), boundary_knots=3)
+    refine = lm.Manifold.refine
+
+    def solved(stall: float) -> tuple[rq.DesignResult, list[float], int]:
+        losses, at = [], []
+        monkeypatch.setattr(loop, "BASIS_STALL", stall)
+        monkeypatch.setattr(lm.Manifold, "refine",
+                            lambda self: at.append(len(losses) - 1) or refine(self))
+        res = prob.solve(opts, callback=lambda d: losses.append(d["objective"]))
+        assert len(at) == 1 and res.stats.status == "Solve_Succeeded"
+        return res, losses, at[0]
+
+    stall, steps = lm.BASIS_STALL, lm.BASIS_STALL_STEPS
+    early, losses, k = solved(stall)
+    late, _, k_late = solved(0.0)
+    assert steps <= k < k_late
+    assert losses[k - steps] - losses[k] < stall * losses[k]
+    assert all(losses[i - steps] - losses[i] >= stall * losses[i] for i in range(steps, k))
+    assert early.stats.objective == pytest.approx(late.stats.objective, rel=1e-8)
+
+
 @pytest.mark.parametrize("name", ["sphere_cap", "hyperboloid", "quarter_vase"])
 def test_levenberg_marquardt_alone_reaches_ipopts_optimum(name):
     """To tol 1e-6, with no IPOPT handover: IPOPT's loss (at tol 1e-9) to 1e-6, its design

@@ -31,8 +31,9 @@ whole, from products with it (:class:`.sensitivities.Sensitivity`).
 The steps can be taken in a coarse basis of the design first, d = B u (n_u < n_d,
 :func:`boundary_basis`: each class of boundary data piecewise linear between a few knots),
 whose pass costs (n_u / n_d)^2 of the whole design's in its Gram matrices; where that run
-ends optimal in the basis or stalls, it goes on in the whole design
-(:func:`levenberg_marquardt`).
+ends optimal in the basis or stalls, or its loss stops falling (by less than
+:data:`BASIS_STALL` of itself over the last :data:`BASIS_STALL_STEPS` steps), it goes on in
+the whole design (:func:`levenberg_marquardt`).
 
 Each iteration solves the damped, linearised problem
 
@@ -103,14 +104,15 @@ change to one is made in its own module.
 
 from .gram import BANDS
 from .interface import solve
-from .loop import (CORRECTIONS, DOMAIN_DAMPING, MAX_DAMPING, METRIC_DAMPING, RESTORED,
-                   SUCCESS, TOWARD_REFERENCE, MarchedOutcome, admissible_toward,
-                   levenberg_marquardt)
+from .loop import (BASIS_STALL, BASIS_STALL_STEPS, CORRECTIONS, DOMAIN_DAMPING, MAX_DAMPING,
+                   METRIC_DAMPING, RESTORED, SUCCESS, TOWARD_REFERENCE, MarchedOutcome,
+                   admissible_toward, levenberg_marquardt)
 from .manifold import FEASIBLE, Manifold, boundary_basis
 from .secant import SECANT_PAIRS
 from .window import CHUNK_ROWS, WHOLE_S
 
-__all__ = ["BANDS", "CHUNK_ROWS", "CORRECTIONS", "DOMAIN_DAMPING", "FEASIBLE", "MAX_DAMPING",
-           "METRIC_DAMPING", "RESTORED", "SECANT_PAIRS", "SUCCESS", "TOWARD_REFERENCE",
-           "WHOLE_S", "Manifold", "MarchedOutcome", "admissible_toward", "boundary_basis",
-           "levenberg_marquardt", "solve"]
+__all__ = ["BANDS", "BASIS_STALL", "BASIS_STALL_STEPS", "CHUNK_ROWS", "CORRECTIONS",
+           "DOMAIN_DAMPING", "FEASIBLE", "MAX_DAMPING", "METRIC_DAMPING", "RESTORED",
+           "SECANT_PAIRS", "SUCCESS", "TOWARD_REFERENCE", "WHOLE_S", "Manifold",
+           "MarchedOutcome", "admissible_toward", "boundary_basis", "levenberg_marquardt",
+           "solve"]

@@ -39,6 +39,16 @@ TOWARD_REFERENCE = (0.1, 0.25, 0.5, 1.0)
 RESTORED = 0.5
 #: statuses of a run that ended where it should
 SUCCESS = ("Solve_Succeeded", "Fit_Reached")
+#: a run in a coarse basis ends, and goes on in the whole design, once its loss fell by less
+#: than this fraction of itself over the last :data:`BASIS_STALL_STEPS` accepted steps: the
+#: plateau before its optimality in the basis (the whole design's first step from there gains
+#: 3-5% at 100 x 100); 1e-2 left earlier but took more of the whole design's dearer steps
+#: (docs/decisions/levenberg-marquardt.md, 2026-12-07: "Leaving the coarse basis once its loss
+#: stops falling"); 0: the basis runs to ``tol``
+BASIS_STALL = 1e-3
+#: the accepted steps over which :data:`BASIS_STALL` measures the fall of the loss (one
+#: step's fall varies ten-fold from the next)
+BASIS_STALL_STEPS = 3
 
 
 @dataclass
@@ -47,7 +57,9 @@ class MarchedOutcome:
     accepted steps, the status and the optimality error (:func:`.steps.kkt_error`, scaled) at
     the last point tested (None when none was). Statuses: "Solve_Succeeded" (first-order
     optimal to ``tol``), "Fit_Reached" (``stop`` held), "Stalled" (no step lowers the
-    loss), "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
+    loss), "Basis_Stalled" (the loss fell by less than :data:`BASIS_STALL` over the last
+    steps, only in a coarse basis, which :func:`levenberg_marquardt` then refines),
+    "Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", or
     "Inadmissible_Start" (the start, re-marched, does not march, or breaks a constraint
     and its restoration did not reach an admissible point: ``x`` is the start as given,
     ``objective`` None, ``iterations`` the restoration steps taken). ``scale``: the
@@ -93,7 +105,8 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
     "Inadmissible_Start" where x does not march or the restoration fails.
 
     With a coarse basis (:attr:`.manifold.Manifold.coarse`) the steps are taken in it first; where
-    that run ends optimal in it or stalls, the manifold is refined and the run goes on in
+    that run ends optimal in it, stalls, or its loss stops falling (:data:`BASIS_STALL`:
+    status "Basis_Stalled", never returned), the manifold is refined and the run goes on in
     the whole design from there, its optimality error scaled as the first run's, so
     "Solve_Succeeded" always means the whole design's optimality conditions; where its
     restoration failed, the run restores the start again in the whole design.
@@ -107,7 +120,7 @@ def levenberg_marquardt(nlp: NLP, x: np.ndarray, damping: float, max_iter: int,
                   callback, tol)
         if moved is not None:
             out = replace(out, moved=moved[1])
-    if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled",
+    if not man.coarse or out.status not in ("Solve_Succeeded", "Stalled", "Basis_Stalled",
                                             "Inadmissible_Start"):
         return out
     if out.status == "Inadmissible_Start" and man.marched(out.x) is None:
@@ -144,7 +157,8 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
         scale: float | None = None) -> MarchedOutcome:
     """One run of :func:`levenberg_marquardt` on ``man``, in its basis (``announce``: the
     callback at the start too; ``scale``: the optimality error's, None: from the first
-    gradient), a start that breaks a constraint restored first."""
+    gradient), a start that breaks a constraint restored first; in a coarse basis it ends
+    "Basis_Stalled" where the loss stops falling (:data:`BASIS_STALL`)."""
     nlp = man.nlp
     x = np.asarray(x, dtype=float)
     p = man.marched(x)
@@ -159,6 +173,7 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
     B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
     augmented, error, last, kept = False, None, None, None
+    losses = [] if restoring else [p.objective]  # the last admissible points', for the stall
     status = "Maximum_Iterations_Exceeded"
     while it < max_iter:
         lin = m = None  # the last point's derivatives go before the next are built
@@ -240,6 +255,12 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
         if stop is not None and not restoring and stop(p.x):
             status = "Fit_Reached"
             break
+        if man.coarse and not restoring and BASIS_STALL > 0:
+            losses = (losses + [p.objective])[-BASIS_STALL_STEPS - 1:]
+            if (len(losses) > BASIS_STALL_STEPS
+                    and losses[0] - losses[-1] < BASIS_STALL * losses[-1]):
+                status = "Basis_Stalled"
+                break
     if restoring:  # no admissible point reached: the start as given
         return MarchedOutcome(x=x, objective=None, iterations=it, status="Inadmissible_Start",
                        restored=it)
