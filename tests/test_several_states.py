@@ -280,6 +280,17 @@ def test_two_mesh_states_of_a_known_pattern(known):
         rq.DesignProblem(target=meshes, panels=PANELS).grid(result)
 
 
+@pytest.mark.parametrize("panels, coarse", [((8, 8), None), ((6, 4), None),
+                                             ((12, 12), (8, 8)), ((20, 12), (8, 4)),
+                                             ((40, 6), (8, 4))])
+def test_orientations_are_screened_first_on_a_coarse_pattern_in_proportion(panels, coarse):
+    problem = rq.DesignProblem(target=[rq.surfaces.get("sphere_cap")] * 2, panels=panels)
+    got = several.coarse_problem(problem)
+    assert (None if got is None else got.panels) == coarse
+    if got is not None:
+        assert got.targets == problem.targets and got.omega == problem.omega
+
+
 def test_the_view_marks_every_state(two_states):
     steps = view.spec(two_states, frames=8)["layout"]["sliders"][0]["steps"]
     marked = {step["label"]: float(step["value"]) for step in steps

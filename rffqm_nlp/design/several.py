@@ -34,6 +34,12 @@ START_FOLDS = 41
 SCREEN_ITERATIONS = 10
 #: Largest constraint violation of a screening solve's last point that still counts.
 SCREEN_FEASIBLE = 1e-6
+#: Panels along the longer side of the coarse pattern on which a larger pattern's
+#: candidate orientations are screened first (:func:`screened`, :func:`coarse_problem`).
+SCREEN_PANELS = 8
+#: The candidates, best first on the coarse pattern, screened again at the pattern's own
+#: panels (docs/several_states.md, "Which way a mesh runs").
+SCREEN_KEEP = 3
 #: Controls a side of each state's free correspondence: more than one state's
 #: (:data:`~rffqm_nlp.design.transcription.GRID_CONTROLS`), since one pattern no longer
 #: bends to each mesh's parametrization (docs/several_states.md, "Which way a mesh runs").
@@ -172,7 +178,10 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     too), every later one's given those chosen before it. The orientation that wins is
     the one whose first continuation stage, at most :data:`SCREEN_ITERATIONS` iterations
     (counted in ``run``, within its time limit), ends with the least loss at a point that
-    holds the constraints (the identity where none does). A surface given by its
+    holds the constraints (the identity where none does). A pattern of more than
+    :data:`SCREEN_PANELS` panels a side screens every candidate on the coarse pattern of
+    :func:`coarse_problem` first, from its Miura-ori start, and only the
+    :data:`SCREEN_KEEP` best there at its own panels. A surface given by its
     parametrization is laid on as parametrized. Returns the plan and notes on what was
     chosen."""
     meshes = [k for k, target in enumerate(problem.targets)
@@ -181,15 +190,31 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     if 0 in meshes:  # the first state's orientation, jointly with the next mesh state's
         groups = [tuple(meshes[:2])] + groups[2:]
     chosen: dict[int, tuple[bool, bool, bool]] = {}
-    scans = fold_scans(problem, first)
+    coarse = coarse_problem(problem)
+    levels = [(problem, first)] if coarse is None else [
+        (coarse, first_problem(coarse).start()), (problem, first)]
+    levels = [(at, start, fold_scans(at, start)) for at, start in levels]
     for group in groups:
         candidates = list(itertools.product(ORIENTATIONS, repeat=len(group)))
-        scores = [_screen(problem, plan(problem, first, {**chosen, **dict(zip(group, c))},
-                                        scans), run) for c in candidates]
-        chosen.update(zip(group, candidates[int(np.argmin(scores))]))
+        for at, start, scans in levels:
+            scores = [_screen(at, plan(at, start, {**chosen, **dict(zip(group, c))}, scans),
+                              run) for c in candidates]
+            best = np.argsort(scores, kind="stable")[:1 if at is problem else SCREEN_KEEP]
+            candidates = [candidates[i] for i in best]
+        chosen.update(zip(group, candidates[0]))
     notes = tuple(f"state {k + 1}'s mesh lattice is laid on {_orientation_text(chosen[k])}, "
                   f"the least loss of the orientations screened" for k in meshes)
-    return plan(problem, first, chosen, scans), notes
+    return plan(problem, first, chosen, levels[-1][2]), notes
+
+
+def coarse_problem(problem: DesignProblem) -> DesignProblem | None:
+    """``problem`` at :data:`SCREEN_PANELS` panels along its longer side (the other side in
+    proportion, even, at least 4 as every pattern), where it has more; None otherwise."""
+    longest = max(problem.panels)
+    if longest <= SCREEN_PANELS:
+        return None
+    panels = tuple(max(4, 2 * round(p * SCREEN_PANELS / longest / 2)) for p in problem.panels)
+    return replace(problem, panels=panels)
 
 
 def _screen(problem: DesignProblem, trial_plan: Plan, run: Run) -> float:
