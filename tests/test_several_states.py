@@ -77,12 +77,14 @@ def test_two_states_of_a_known_pattern_come_back(known):
     assert result.stats.marched_iterations == result.stats.iterations > 0
 
 
-def test_fixed_omega_is_kept_by_ipopt_too(known):
+@pytest.mark.parametrize("solver", ["levenberg-marquardt", "ipopt"])
+def test_fixed_omega_is_kept(known, solver):
     _, omegas, targets = known
     result = rq.DesignProblem(target=targets, panels=PANELS, correspondence="lattice",
                               omega=[None, omegas[1]], state_weights=[1.0, 2.0]
-                              ).solve(solver="ipopt")
-    assert result.stats.solver == "ipopt" and result.stats.marched_iterations == 0
+                              ).solve(solver=solver)
+    assert result.stats.solver == solver
+    assert (result.stats.marched_iterations > 0) == (solver == "levenberg-marquardt")
     assert result.states[1].omega == pytest.approx(omegas[1], abs=1e-12)
     assert abs(result.states[0].omega - omegas[0]) <= 0.02
 
@@ -255,13 +257,13 @@ def test_an_orientation_relabels_the_lattice_alike_in_numpy_and_casadi(orientati
     assert sum(np.array_equal(a, others[0]) for a in others) == 1  # eight distinct
 
 
-def test_two_mesh_states_of_a_known_pattern(known):
-    """Meshes through the two lattices (four times finer), each in its own pose and its
-    own parametrization: both orientations are screened, and issue 44's goal holds (both
-    folds within 0.02, both fits within 0.2%)."""
+@pytest.fixture(scope="module")
+def meshes(known):
+    """Meshes through the two lattices of ``known`` (four times finer), each in its own
+    pose, parametrized by rffqm-nlp."""
     truth, omegas, _ = known
     rng = np.random.default_rng(2)
-    meshes = []
+    out = []
     for omega in omegas:
         lattice = rq.numpy_model.fold(truth.pattern, omega)[::2, ::2]
         index = np.arange(lattice.shape[0])
@@ -269,7 +271,24 @@ def test_two_mesh_states_of_a_known_pattern(known):
         points = np.stack([RectBivariateSpline(index, index, lattice[..., c])(fine, fine)
                            for c in range(3)], -1)
         moved = points.reshape(-1, 3) @ Rotation.random(random_state=rng).as_matrix().T
-        meshes.append(rq.surfaces.Mesh((moved, rq.surfaces.grid_faces(*points.shape[:2]))))
+        out.append(rq.surfaces.Mesh((moved, rq.surfaces.grid_faces(*points.shape[:2]))))
+    return out
+
+
+def test_the_screening_keeps_within_max_iter(meshes):
+    """The screening's iterations count toward max_iter and stop where it runs out: the
+    solve then ends for want of iterations, having taken no more than asked."""
+    with pytest.raises(rq.SolverFailed, match="raise max_iter") as exc:
+        rq.DesignProblem(target=meshes, panels=(8, 8)).solve(max_iter=25)
+    assert exc.value.status == "Maximum_Iterations_Exceeded"
+    assert exc.value.stats.iterations == 25
+
+
+def test_two_mesh_states_of_a_known_pattern(known, meshes):
+    """Meshes through the two lattices (four times finer), each in its own pose and its
+    own parametrization: both orientations are screened, and issue 44's goal holds (both
+    folds within 0.02, both fits within 0.2%)."""
+    _, omegas, _ = known
     result = rq.DesignProblem(target=meshes, panels=PANELS).solve(
         continuation=(1.0, 0.1, 0.01, 0.001))
     said = [n for n in result.notes if "the least loss of the orientations screened" in n]
@@ -284,6 +303,9 @@ def test_two_mesh_states_of_a_known_pattern(known):
                                              ((12, 12), (8, 8)), ((20, 12), (8, 4)),
                                              ((40, 6), (8, 4))])
 def test_orientations_are_screened_first_on_a_coarse_pattern_in_proportion(panels, coarse):
+    """A pattern of more than SCREEN_PANELS panels a side is screened first at that many
+    along its longer side, the other in proportion (even, at least 4); a smaller one is
+    screened as it is."""
     problem = rq.DesignProblem(target=[rq.surfaces.get("sphere_cap")] * 2, panels=panels)
     got = several.coarse_problem(problem)
     assert (None if got is None else got.panels) == coarse

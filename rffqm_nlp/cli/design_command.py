@@ -96,11 +96,6 @@ def design(
 SOLVER_NAMES = {"ipopt": "IPOPT", "levenberg-marquardt": "Levenberg-Marquardt"}
 
 
-def _solver_name(problem: "DesignProblem", options: "SolveOptions") -> str:
-    """The progress label of the solver that runs: IPOPT for a design of several states."""
-    return SOLVER_NAMES["ipopt" if problem.several else options.solver]
-
-
 def _solve(problem: "DesignProblem", options: "SolveOptions", quiet: bool) -> "DesignResult":
     """Solve, with a live progress display unless ``quiet`` (on a terminal; elsewhere, as
     in a log file, a plain line every few seconds)."""
@@ -120,7 +115,7 @@ def _solve(problem: "DesignProblem", options: "SolveOptions", quiet: bool) -> "D
                                  inf_pr="-")
 
         def update(entry: dict) -> None:
-            progress.update(task, description=_solver_name(problem, options), iter=entry["iter"],
+            progress.update(task, description=SOLVER_NAMES[options.solver], iter=entry["iter"],
                             objective=f"{entry['objective']:.4e}",
                             inf_pr=f"{entry['inf_pr']:.2e}")
 
@@ -135,7 +130,7 @@ def _solve_logged(problem: "DesignProblem", options: "SolveOptions",
     def update(entry: dict) -> None:
         if entry["elapsed"] - last[0] >= every:
             last[0] = entry["elapsed"]
-            output.console.print(f"{_solver_name(problem, options)} iteration {entry['iter']}: "
+            output.console.print(f"{SOLVER_NAMES[options.solver]} iteration {entry['iter']}: "
                                  f"objective {entry['objective']:.4e}, violation "
                                  f"{entry['inf_pr']:.2e}, {entry['elapsed']:.0f} s",
                                  highlight=False)

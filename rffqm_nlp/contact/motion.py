@@ -197,7 +197,7 @@ def _end_bounds(st: States, rows: np.ndarray, m: np.ndarray,
     ia, ib, p, q = rows.T
     da = _in_batches(lower_bound, st, ia, p, q)
     db = da - m
-    k = np.flatnonzero(db <= clearance)
+    k = np.flatnonzero(~(db > clearance))  # a NaN bound goes to the cheap bound too
     db[k] = _in_batches(lower_bound, st, ib[k], p[k], q[k])
     return da, db
 

@@ -177,8 +177,9 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     (64 pairs; the pattern's Miura start has a direction, so the first state's matters
     too), every later one's given those chosen before it. The orientation that wins is
     the one whose first continuation stage, at most :data:`SCREEN_ITERATIONS` iterations
-    (counted in ``run``, within its time limit), ends with the least loss at a point that
-    holds the constraints (the identity where none does). A pattern of more than
+    (counted in ``run`` and toward its ``max_iter``, within its time limit), ends with the
+    least loss at a point that holds the constraints (the identity where none does, or
+    where no iteration or time was left). A pattern of more than
     :data:`SCREEN_PANELS` panels a side screens every candidate on the coarse pattern of
     :func:`coarse_problem` first, from its Miura-ori start, and only the
     :data:`SCREEN_KEEP` best there at its own panels. A surface given by its
@@ -186,6 +187,8 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
     chosen."""
     meshes = [k for k, target in enumerate(problem.targets)
               if isinstance(target, surfaces.Mesh)]
+    if not meshes:
+        return plan(problem, first), ()
     groups = [(k,) for k in meshes]
     if 0 in meshes:  # the first state's orientation, jointly with the next mesh state's
         groups = [tuple(meshes[:2])] + groups[2:]
@@ -199,6 +202,9 @@ def screened(problem: DesignProblem, first: Start, run: Run) -> tuple[Plan, tupl
         for at, start, scans in levels:
             scores = [_screen(at, plan(at, start, {**chosen, **dict(zip(group, c))}, scans),
                               run) for c in candidates]
+            if np.isinf(scores).all():  # none holds the constraints, or no time was left
+                candidates = [(ORIENTATIONS[0],) * len(group)]
+                break
             best = np.argsort(scores, kind="stable")[:1 if at is problem else SCREEN_KEEP]
             candidates = [candidates[i] for i in best]
         chosen.update(zip(group, candidates[0]))
@@ -219,12 +225,17 @@ def coarse_problem(problem: DesignProblem) -> DesignProblem | None:
 
 def _screen(problem: DesignProblem, trial_plan: Plan, run: Run) -> float:
     """The loss of ``trial_plan``'s first continuation stage cut at
-    :data:`SCREEN_ITERATIONS` iterations (counted in ``run``, within its time limit); inf
-    where its last point breaks a constraint."""
-    left = None if run.deadline is None else max(run.deadline - time.perf_counter(), 1e-3)
-    trial = Run(replace(run.options, max_iter=SCREEN_ITERATIONS, time_limit=left))
+    :data:`SCREEN_ITERATIONS` iterations (counted in ``run``, within what its ``max_iter``
+    and time limit leave); inf where its last point breaks a constraint, and without a
+    solve where ``run`` has no iteration or no time left."""
+    left = None if run.deadline is None else run.deadline - time.perf_counter()
+    if run.iterations_left <= 0 or (left is not None and left <= 0):
+        return np.inf
+    trial = Run(replace(run.options, max_iter=min(SCREEN_ITERATIONS, run.iterations_left),
+                        time_limit=left))
     nlp, outcome = _solve_plan(problem, trial_plan, trial, run.options.continuation[:1])
     run.iterations += trial.iterations
+    run.gauss_newton_iterations += trial.gauss_newton_iterations
     run.marched_iterations += trial.marched_iterations
     run.restoration_iterations += trial.restoration_iterations
     run.build_time += trial.build_time

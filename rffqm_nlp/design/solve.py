@@ -212,11 +212,12 @@ def memory_estimate(problem: DesignProblem, options: SolveOptions | None = None)
     goes on in the whole design: then n_d's memory), plus a free correspondence's 2 Ku Kv
     controls (at most 2 GRID_CONTROLS^2,
     :class:`rffqm_nlp.design.transcription.Correspondence`). A design of several targets
-    (IPOPT on the simultaneous NLP of every state, :mod:`rffqm_nlp.design.several`)
-    counts one simultaneous NLP per target."""
+    (the simultaneous NLP of every state, :mod:`rffqm_nlp.design.several`) counts one
+    simultaneous NLP per target, as IPOPT solves it (what Levenberg-Marquardt needs on it
+    is not measured)."""
     options = options or SolveOptions()
     P, Q = (float(p) for p in problem.panels)
-    if problem.several:  # IPOPT on the simultaneous NLP, one state's kinematics per target
+    if problem.several:  # the simultaneous NLP, one state's kinematics per target
         need = len(problem.targets) * memory.design_estimate(problem.panels, "simultaneous")
         return int(min(need, 2.0 ** 62))
     if options.solver != LM:

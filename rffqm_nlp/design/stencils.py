@@ -197,29 +197,42 @@ class LocalJacobian:
 class GraphJacobian:
     """The Jacobian (n_g x n_x, CSC) of an expression ``rows`` of ``x`` by CasADi's
     differentiation of the whole graph, with :class:`LocalJacobian`'s interface
-    (:meth:`pattern`, and its nonzeros at x when called). For an NLP small enough that the
-    graph's Jacobian costs little to build (an NLP of several states,
-    :func:`rffqm_nlp.design.transcription.several_states`) and whose rows are not stated as
-    stencils. CasADi's sparsity is compressed by column, so its nonzeros come in CSC order."""
+    (:meth:`pattern`, and its nonzeros at x when called; built at the first use). For an
+    NLP small enough that the graph's Jacobian costs little to build (an NLP of several
+    states, :func:`rffqm_nlp.design.transcription.several_states`) and whose rows are not
+    stated as stencils. CasADi's sparsity is compressed by column, so its nonzeros come in
+    CSC order."""
 
     def __init__(self, rows: ca.MX, x: ca.MX):
-        function = ca.Function("jacobian", [x], [ca.jacobian(rows, x)])
-        colind, row = (np.array(a, dtype=np.int64) for a in function.sparsity_out(0).get_ccs())
+        self.rows, self.x = rows, x
         self.shape = (rows.numel(), x.numel())
+        self._eval: Callable[[], None] | None = None
+
+    def with_rows(self, rows: ca.MX) -> "GraphJacobian":
+        """This Jacobian with the rows ``rows`` appended (their indices from n_g on)."""
+        return GraphJacobian(ca.vertcat(self.rows, rows), self.x)
+
+    def _build(self) -> None:
+        if self._eval is not None:
+            return
+        function = ca.Function("jacobian", [self.x], [ca.jacobian(self.rows, self.x)])
+        colind, row = (np.array(a, dtype=np.int64) for a in function.sparsity_out(0).get_ccs())
         self._structure = Structure(index_array(row), colind, self.shape)
         self._buffer, self._eval = function.buffer()
-        self._x = np.zeros(x.numel())
+        self._in = np.zeros(self.shape[1])
         self._out = np.zeros(row.size)
-        self._buffer.set_arg(0, memoryview(self._x))
+        self._buffer.set_arg(0, memoryview(self._in))
         self._buffer.set_res(0, memoryview(self._out))
 
     def pattern(self) -> sp.csc_matrix:
         """The sparsity, data = 1 + the index of each nonzero."""
+        self._build()
         return self._structure.pattern()
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The nonzeros (nnz,) at x (n_x,)."""
-        self._x[:] = x
+        self._build()
+        self._in[:] = x
         self._eval()
         return self._out.copy()
 

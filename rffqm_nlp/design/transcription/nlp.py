@@ -63,12 +63,14 @@ class NLP:
     #: two values along each edge); -1 elsewhere
     #: (:func:`rffqm_nlp.design.solvers.levenberg_marquardt.boundary_basis`)
     boundary_class: np.ndarray | None = None
-    #: the Jacobians of the residuals and of g assembled from local stencils
-    #: (:mod:`rffqm_nlp.design.stencils`), for
-    #: :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`; None: only CasADi's
-    #: Jacobians of the whole graph
-    r_jacobian: stencils.LocalJacobian | stencils.LiftedJacobian | None = None
-    g_jacobian: stencils.LocalJacobian | None = None
+    #: the Jacobians of the residuals and of g for
+    #: :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`: assembled from local stencils
+    #: (:mod:`rffqm_nlp.design.stencils`), or CasADi's of the whole graph
+    #: (:class:`~rffqm_nlp.design.stencils.GraphJacobian`, an NLP of several states); None:
+    #: Levenberg-Marquardt does not solve the NLP
+    r_jacobian: (stencils.LocalJacobian | stencils.LiftedJacobian | stencils.GraphJacobian
+                 | None) = None
+    g_jacobian: stencils.LocalJacobian | stencils.GraphJacobian | None = None
     #: every folded state of an NLP of several states of one sheet
     #: (:func:`.states_nlp.several_states`), the first also ``unpack``'s omega, ``folded``
     #: and ``free_target``; () for one state
@@ -96,7 +98,9 @@ class NLP:
         they are inequalities, which :mod:`rffqm_nlp.design.solvers.levenberg_marquardt`
         linearises like the others."""
         jacobian = self.g_jacobian
-        if jacobian is not None:
+        if isinstance(jacobian, stencils.GraphJacobian):
+            jacobian = jacobian.with_rows(rows)
+        elif jacobian is not None:
             n_g, n = self.g.numel(), self.x.numel()
             jacobian = jacobian.with_stencil(stencils.stencil(
                 ca.Function("rows", [self.x, ca.MX.sym("p", 0)], [rows]),
@@ -150,6 +154,11 @@ class Layout:
         for n, v in values.items():
             out[self.slices[n]] = np.asarray(v, dtype=float).reshape(self.shapes[n]).ravel("F")
         return out
+
+    def indices(self, *names: str) -> np.ndarray:
+        """Flat indices of the blocks ``names``, one after the other (empty for none)."""
+        return np.concatenate([np.arange(self.slices[n].start, self.slices[n].stop)
+                               for n in names] + [np.zeros(0, dtype=np.int64)])
 
     def index(self, name: str, rows, cols) -> np.ndarray:
         """Flat indices of block ``name`` at [rows, cols] (column-major storage)."""

@@ -77,9 +77,7 @@ def simultaneous(setup: Setup) -> NLP:
     ubg = np.concatenate([np.zeros(n_eq), pattern.upper])
     if corr is not None:
         g, lbg, ubg = with_grid_rows(corr, grid, g, lbg, ubg)
-    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
-                                           for n in names])
-    grid_index = block("U", "V") if corr is not None else np.zeros(0, dtype=np.int64)
+    grid_index = lay.indices(*(("U", "V") if corr is not None else ()))
     project = Projection(x, v, lay, start.sigma, tree, grid_index)
     x0 = project(lay.pack({"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
                            "omega": setup.omega, "rigid": setup.rigid0()}))
@@ -110,11 +108,11 @@ def simultaneous(setup: Setup) -> NLP:
     if corr is not None:
         weights[grid_index] = corr.damping_weights()
         free_target = ca.Function("target", [x], corr.lattice(*grid))
-    design = np.concatenate([*groups.values(), block("rigid"), grid_index])
+    design = np.concatenate([*groups.values(), lay.indices("rigid"), grid_index])
     return NLP(x=x, residuals=res, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=unpack, folded=folded, groups=groups, project=project, parts=parts,
                damping_weights=weights, design_index=design,
-               pattern_index=block("A", "B", "LH", "LV"), free_target=free_target,
+               pattern_index=lay.indices("A", "B", "LH", "LV"), free_target=free_target,
                boundary_position=position, boundary_class=boundary_class,
                grid_index=None if corr is None else grid_index,
                r_jacobian=residual_jacobian(setup, lay, res.numel()),
@@ -140,8 +138,7 @@ def marched_blocks(setup: Setup, tree: MeanTree) -> dict[str, np.ndarray]:
     bd0, corr = setup.boundary, setup.correspondence
     lay = layout(bd0.N, bd0.M, tree, corr)
     x = ca.MX.sym("x", lay.size)
-    grid = (np.concatenate([np.arange(lay.size)[lay.slices[n]] for n in ("U", "V")])
-            if corr is not None else np.zeros(0, dtype=np.int64))
+    grid = lay.indices(*(("U", "V") if corr is not None else ()))
     start = numpy_model.march(bd0)
     point = Projection(x, lay.views(x), lay, start.sigma, tree, grid)(lay.pack(
         {"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
@@ -312,7 +309,7 @@ class Projection:
         self._marched = Evaluation(ca.Function("project", [x], [*out, nodes]),
                                    [np.zeros(lay.size)])
         self._lay, self._sigma, self._keep = lay, sigma, np.concatenate(
-            [np.arange(lay.size)[lay.slices[n]] for n in ("omega", "rigid")] + [grid_index])
+            [lay.indices("omega", "rigid"), grid_index])
         self._kh0, self._sp = fold_multipliers_kv(sigma)
 
     def __call__(self, xk: np.ndarray) -> np.ndarray | None:

@@ -139,25 +139,23 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float],
             lengths[lay.slices[name]] = True
         if name.startswith("rigid"):
             lengths[lay.slices[name].stop - 3:lay.slices[name].stop] = True
-    weights = damping_weights(first, lengths)
-    block = lambda *names: np.concatenate([np.arange(lay.size)[lay.slices[n]]  # noqa: E731
-                                           for n in names])
+    damping = damping_weights(first, lengths)
     grids = []
     for k, setup in enumerate(setups):
         if setup.correspondence is not None:
-            grids.append(block(f"U{k}", f"V{k}"))
-            weights[grids[-1]] = setup.correspondence.damping_weights()
-    design = np.concatenate([*groups.values(), block(*(f"rigid{k}" for k in range(K))),
+            grids.append(lay.indices(f"U{k}", f"V{k}"))
+            damping[grids[-1]] = setup.correspondence.damping_weights()
+    design = np.concatenate([*groups.values(), lay.indices(*(f"rigid{k}" for k in range(K))),
                              *grids])
     position, klass = boundary_places(lay, N, M)
     residuals = ca.vertcat(*losses, *own)
     state0 = functions[0]
     return NLP(x=x, residuals=residuals, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, x0=x0,
                unpack=ca.Function("unpack", [x], [pattern.boundary, v["omega0"]]),
-               folded=state0.folded, groups=groups, parts=parts, damping_weights=weights,
+               folded=state0.folded, groups=groups, parts=parts, damping_weights=damping,
                free_target=state0.target, states=tuple(functions),
                project=StatesProjection(setups, lay, tree, start.sigma),
-               design_index=design, pattern_index=block("A", "B", "LH", "LV"),
+               design_index=design, pattern_index=lay.indices("A", "B", "LH", "LV"),
                boundary_position=position, boundary_class=klass,
                r_jacobian=GraphJacobian(residuals, x), g_jacobian=GraphJacobian(g, x))
 
@@ -177,9 +175,7 @@ class StatesProjection:
         for k, setup in enumerate(setups):
             single = layout(N, M, tree, setup.correspondence)
             xs = ca.MX.sym("x", single.size)
-            grid = (np.concatenate([np.arange(single.size)[single.slices[n]]
-                                    for n in ("U", "V")])
-                    if setup.correspondence is not None else np.zeros(0, dtype=np.int64))
+            grid = single.indices(*(("U", "V") if setup.correspondence is not None else ()))
             names = list(single.shapes)
             written = [n for n in names if (n not in pattern or k == 0)
                        and n not in ("omega", "rigid", "U", "V")]
@@ -204,10 +200,8 @@ def _indices(single: Layout, lay: Layout, names: Sequence[str], k: int
     """The indices of the blocks ``names`` in a one-state layout and, in the same order,
     of the same blocks in the layout of several states (a state's own block named with
     its number ``k``)."""
-    ours = [np.arange(single.size)[single.slices[n]] for n in names]
-    theirs = [np.arange(lay.size)[lay.slices[n if n in lay.slices else f"{n}{k}"]]
-              for n in names]
-    return np.concatenate(ours), np.concatenate(theirs)
+    return (single.indices(*names),
+            lay.indices(*(n if n in lay.slices else f"{n}{k}" for n in names)))
 
 
 def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
@@ -225,8 +219,7 @@ def _bounds(setups: Sequence[Setup], lay: Layout, x0: np.ndarray
             lbx[lay.index(f"{name}{k}", 0, 0)] = ubx[lay.index(f"{name}{k}", 0, 0)] = 0.0
         lbx[lay.index(f"Qw{k}", 0, 0)] = ubx[lay.index(f"Qw{k}", 0, 0)] = 1.0
         if setup.correspondence is not None:
-            grid = np.concatenate([np.arange(lay.size)[lay.slices[f"{n}{k}"]]
-                                   for n in ("U", "V")])
+            grid = lay.indices(f"U{k}", f"V{k}")
             lbx[grid], ubx[grid] = setup.correspondence.bounds()
     groups = {**pattern_groups(lay),
               "omega": np.array([lay.index(f"omega{k}", 0, 0)[0] for k in range(len(setups))])}
