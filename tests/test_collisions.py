@@ -429,7 +429,7 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
     pat = make(seed)
     whole = collisions(pat, omega_max, clearance=clearance)
     chunks, batches, per_row = [], [], []
-    coarse, per_state, in_batches = broad.coarse_rows, motion.per_state, motion._in_batches
+    coarse, per_state, in_batches = broad.coarse_rows, motion.per_state, motion.in_batches
 
     def counted_rows(*args):
         for rows, m in coarse(*args):
@@ -447,7 +447,7 @@ def test_pairs_held_at_once_are_bounded_by_the_chunk_size(make, seed, clearance,
     monkeypatch.setattr(broad, "ROWS", 8)
     monkeypatch.setattr(broad, "coarse_rows", counted_rows)
     monkeypatch.setattr(motion, "per_state", counted_per_state)
-    monkeypatch.setattr(motion, "_in_batches", counted_in_batches)
+    monkeypatch.setattr(motion, "in_batches", counted_in_batches)
     chunked = collisions(pat, omega_max, clearance=clearance)
     assert chunked == whole and not whole.free
     assert max(chunks) <= 8 and max(batches) <= 2 * 8 and max(per_row) <= 8

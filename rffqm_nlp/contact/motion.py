@@ -166,7 +166,7 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
                   else (ends[keep, 0].copy(), ends[keep, 1].copy()))
         loose = (da + db - m) / 2 <= clearance      # m so far an upper bound (inf: none)
         for bound in (frame_bound, pair_bound):      # m is SAFETY times the smaller at last
-            new = SAFETY * _in_batches(bound, st, ia[loose], ib[loose], p[loose], q[loose])
+            new = SAFETY * in_batches(bound, st, ia[loose], ib[loose], p[loose], q[loose])
             m[loose] = new if bound is frame_bound else np.minimum(m[loose], new)
             loose &= (da + db - m) / 2 <= clearance
         exact = (da + db - m) / 2 <= clearance
@@ -180,7 +180,7 @@ def _refine(st: States, rows: np.ndarray, m: np.ndarray, clearance: float, tol: 
         if open_.any():
             halves = _split(rows[open_], st)
             n = int(open_.sum())
-            mid = _in_batches(lower_bound, st, halves[:n, 1], halves[:n, 2], halves[:n, 3])
+            mid = in_batches(lower_bound, st, halves[:n, 1], halves[:n, 2], halves[:n, 3])
             ends = np.concatenate([np.stack([da[open_], mid], axis=1),
                                    np.stack([mid, db[open_]], axis=1)])
             stack.append((halves, np.full(len(halves), np.inf), ends))
@@ -195,10 +195,10 @@ def _end_bounds(st: States, rows: np.ndarray, m: np.ndarray,
     over the step, so da - m bounds it all over the step, and (da + db - m) / 2 >= da - m
     certifies it), else the cheap bound there."""
     ia, ib, p, q = rows.T
-    da = _in_batches(lower_bound, st, ia, p, q)
+    da = in_batches(lower_bound, st, ia, p, q)
     db = da - m
     k = np.flatnonzero(~(db > clearance))  # a NaN bound goes to the cheap bound too
-    db[k] = _in_batches(lower_bound, st, ib[k], p[k], q[k])
+    db[k] = in_batches(lower_bound, st, ib[k], p[k], q[k])
     return da, db
 
 
@@ -242,7 +242,7 @@ def per_state(f, st: States, s: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.
     return np.concatenate(out or [np.zeros(0)])[inv]
 
 
-def _in_batches(f, st: States, *index: np.ndarray) -> np.ndarray:
+def in_batches(f, st: States, *index: np.ndarray) -> np.ndarray:
     """f(st, *index) (n,) for the index arrays (all (n,)), in batches of ``BATCH``."""
     n = len(index[0])
     out = [f(st, *(x[k:k + BATCH] for x in index)) for k in range(0, n, BATCH)]
