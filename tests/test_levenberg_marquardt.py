@@ -511,11 +511,14 @@ def test_the_secant_term_meets_the_newest_secant_pair(seed, k):
 
 
 def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
-    """Every iteration after the first rebuilds B from the last SECANT_PAIRS accepted steps,
-    a window sliding by one step, the newest the change of the design just accepted."""
+    """Every iteration after the first rebuilds B from the last SECANT_PAIRS accepted steps
+    (TAIL_PAIRS in the tail), a window sliding by one step, the newest the change of the
+    design just accepted."""
     seen, accepted = [], []
     monkeypatch.setattr(secant, "secant_term", lambda pairs, n: (
         seen.append([p[0] for p in pairs]), np.zeros((n, n)))[1])
+    monkeypatch.setattr(secant, "tail_term", lambda pairs, JtJ: (
+        seen.append([p[0] for p in pairs]), np.zeros_like(JtJ))[1])
     last = secant.Last.__init__
 
     def recorded(self, m, steps_, step, change, trial):
@@ -527,10 +530,54 @@ def test_the_secant_term_is_built_from_the_last_accepted_steps(monkeypatch):
     stats = prob.solve(opts).stats
     assert stats.iterations > secant.SECANT_PAIRS + 2 and len(seen) == stats.iterations
     for i, pairs in enumerate(seen):
-        expected = accepted[max(0, i + 1 - secant.SECANT_PAIRS):i + 1]
-        assert len(pairs) == len(expected) <= secant.SECANT_PAIRS
+        expected = accepted[max(0, i + 1 - len(pairs)):i + 1]
+        assert len(pairs) == len(expected)
+        assert len(pairs) in (min(i + 1, secant.SECANT_PAIRS), min(i + 1, secant.TAIL_PAIRS))
         for a, b in zip(pairs, expected):
             assert a is b
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), k=st.integers(1, 9))
+def test_the_tail_term_keeps_the_model_positive_definite_and_meets_the_newest_pair(seed, k):
+    """In the tail J'J + B is J'J updated by BFGS over the pairs: symmetric, positive
+    definite, and meeting the newest pair's structured secant condition
+    (J'J + B) s = J'J s + y_sharp wherever s' (J'J s + y_sharp) > 0; a pair without that
+    curvature is skipped, and no pairs give B = 0."""
+    rng = np.random.default_rng(seed)
+    n = 9
+    J = rng.normal(size=(12, n))
+    JtJ = J.T @ J
+    pairs = []
+    for s in rng.normal(size=(k, n)):
+        y_sharp = rng.normal(size=n)
+        if abs(s @ (JtJ @ s + y_sharp)) < 0.1 * (s @ JtJ @ s):  # clearly one side of 0
+            y_sharp += 0.2 * JtJ @ s
+        pairs.append((s, rng.normal(size=n), y_sharp))
+    B = secant.tail_term(pairs, JtJ)
+    H = JtJ + B
+    np.testing.assert_allclose(B, B.T, atol=1e-10 * np.abs(H).max())
+    assert np.linalg.eigvalsh(0.5 * (H + H.T)).min() > 0
+    s, _, y_sharp = pairs[-1]
+    if s @ (JtJ @ s + y_sharp) > 0:
+        np.testing.assert_allclose(H @ s, JtJ @ s + y_sharp,
+                                   atol=1e-8 * np.abs(H).max() * np.linalg.norm(s))
+    else:
+        np.testing.assert_allclose(B, secant.tail_term(pairs[:-1], JtJ), atol=1e-12)
+    np.testing.assert_array_equal(secant.tail_term([], JtJ), np.zeros((n, n)))
+
+
+@pytest.mark.parametrize("history, tail", [
+    ([(frozenset({4, 7}), 1e-4)] * 3, True),
+    ([(frozenset({4, 7}), 1e-2)] + [(frozenset({4, 7}), 1e-4)] * 2, False),  # damping
+    ([(frozenset({4}), 1e-4)] + [(frozenset({4, 7}), 1e-4)] * 2, False),  # rows changed
+    ([(frozenset(), 1e-4)] * 3, False),  # no row active
+    ([(frozenset({4, 7}), 1e-4)] * 2, False),  # too few steps
+])
+def test_the_tail_is_the_same_active_rows_at_a_small_damping(monkeypatch, history, tail):
+    monkeypatch.setattr(secant, "TAIL_STEPS", 3)
+    assert secant.TAIL_DAMPING > 1e-4
+    assert secant.in_tail(history) is tail
 
 
 @pytest.mark.parametrize("leaves", [True, False])

@@ -57,7 +57,11 @@ part of the Hessian that Gauss-Newton drops, sum r_i Hess r_i (and the active
 inequalities' curvature), by the structured secant update of
 Dennis, Gay & Welsch ("An adaptive nonlinear least-squares algorithm", ACM TOMS 7, 1981;
 NL2SOL), with its sizing, from the change of the Lagrangian's gradient over each of the
-last :data:`SECANT_PAIRS` accepted steps, rebuilt from zero at every iteration; a step uses
+last :data:`SECANT_PAIRS` accepted steps, rebuilt from zero at every iteration; in the tail
+of a run (the step's QP with the same active rows over the last :data:`TAIL_STEPS`
+iterations, lam below :data:`TAIL_DAMPING`) J' J + B is instead J' J updated by BFGS over
+the last :data:`TAIL_PAIRS` steps toward the same structured secant conditions (positive
+definite; it holds the several directions the tail's steps turn between). A step uses
 it when it predicted the last step's reduction better than J' J alone did (NL2SOL's
 choice), and when J' J + B + lam M is positive definite. Where the residuals do not vanish
 at the optimum Gauss-Newton converges only linearly; B speeds up the end.
@@ -108,11 +112,12 @@ from .loop import (BASIS_STALL, BASIS_STALL_STEPS, CORRECTIONS, DOMAIN_DAMPING, 
                    METRIC_DAMPING, RESTORED, SUCCESS, TOWARD_REFERENCE, MarchedOutcome,
                    admissible_toward, levenberg_marquardt)
 from .manifold import FEASIBLE, Manifold, boundary_basis
-from .secant import SECANT_PAIRS
+from .secant import SECANT_PAIRS, TAIL_DAMPING, TAIL_PAIRS, TAIL_STEPS
 from .window import CHUNK_ROWS, WHOLE_S
 
 __all__ = ["BANDS", "BASIS_STALL", "BASIS_STALL_STEPS", "CHUNK_ROWS", "CORRECTIONS",
            "DOMAIN_DAMPING", "FEASIBLE", "MAX_DAMPING", "METRIC_DAMPING", "RESTORED",
-           "SECANT_PAIRS", "SUCCESS", "TOWARD_REFERENCE", "WHOLE_S", "Manifold",
+           "SECANT_PAIRS", "SUCCESS", "TAIL_DAMPING", "TAIL_PAIRS", "TAIL_STEPS",
+           "TOWARD_REFERENCE", "WHOLE_S", "Manifold",
            "MarchedOutcome", "admissible_toward", "boundary_basis", "levenberg_marquardt",
            "solve"]

@@ -172,6 +172,7 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
     lam, nu, it, restored, reach = float(damping), 2.0, 0, 0, 1.0
     B = np.zeros((man.basis.shape[1],) * 2)
     pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (step, y, y_sharp)
+    history: list[tuple[frozenset[int], float]] = []  # the last QPs' active rows and lam
     augmented, error, last, kept = False, None, None, None
     losses = [] if restoring else [p.objective]  # the last admissible points', for the stall
     status = "Maximum_Iterations_Exceeded"
@@ -185,8 +186,10 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
         kept = m.M
         if last is not None:
             pair = (last.step, *last.gradient_change(m, steps))
-            pairs = (pairs + [pair])[-secant.SECANT_PAIRS:]
-            B = secant.secant_term(pairs, man.basis.shape[1])
+            pairs = (pairs + [pair])[-max(secant.SECANT_PAIRS, secant.TAIL_PAIRS):]
+            B = (secant.tail_term(pairs[-secant.TAIL_PAIRS:], m.JtJ)
+                 if secant.in_tail(history)
+                 else secant.secant_term(pairs[-secant.SECANT_PAIRS:], man.basis.shape[1]))
         if augmented and _positive_definite(m.H + B + lam * m.M):
             m.H = m.H + B
         if not restoring:
@@ -201,6 +204,8 @@ def run(man: Manifold, x: np.ndarray, damping: float, max_iter: int, deadline: f
             if step is not None:
                 if first and not restoring:
                     error, first = kkt_error(m, steps, step) / scale, False
+                    active = frozenset(step.which[step.multipliers != 0].tolist())
+                    history = (history + [(active, lam)])[-secant.TAIL_STEPS:]
                     if error <= tol:
                         break
                 dd = step.dd

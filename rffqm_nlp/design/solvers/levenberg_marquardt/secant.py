@@ -1,7 +1,10 @@
 """The structured secant term B of the model (Dennis, Gay & Welsch, "An adaptive nonlinear
 least-squares algorithm", ACM TOMS 7, 1981; NL2SOL): an estimate of the part of the
 Hessian that Gauss-Newton drops, from the change of the Lagrangian's gradient over the last
-:data:`SECANT_PAIRS` accepted steps, and the record of the last step (:class:`Last`) that
+:data:`SECANT_PAIRS` accepted steps (:func:`secant_term`), or, in the tail of a run (the
+same rows active over the last :data:`TAIL_STEPS` steps, the damping below
+:data:`TAIL_DAMPING`), from BFGS updates of the point's J' J over the last
+:data:`TAIL_PAIRS` (:func:`tail_term`); and the record of the last step (:class:`Last`) that
 gives each pair and chooses between the models."""
 
 from __future__ import annotations
@@ -15,6 +18,20 @@ from .steps import Model, Step, Steps
 #: from zero at every iteration, so curvature learned far back is dropped instead of being
 #: sized away with what the last steps learned (docs/decisions/levenberg-marquardt.md)
 SECANT_PAIRS = 3
+#: the accepted steps whose pairs make up B in the tail (:func:`tail_term`): at 100 x 100
+#: the tail's steps turn between directions where the Lagrangian's curvature is a tenth of
+#: J' J's and twice it, more than three pairs hold; 8 is the one value tried in the tail
+#: (docs/decisions/levenberg-marquardt.md, 2026-12-07: "The tail's secant term")
+TAIL_PAIRS = 8
+#: the tail: the step's QP has had the same active rows (at least one) at this many
+#: iterations in a row, ...; 3 took the 100 x 100 sphere cap to 66 iterations (6: 73; 101
+#: before) but switched at the 20 x 20 hyperboloid's end, where the last three steps' term
+#: already converged fast (19 iterations against 16); 6 took no more iterations than before
+#: on the bundled targets at 20 and 40 panels a side
+TAIL_STEPS = 6
+#: ... each with its first trial's damping below this (the same value as the metric's
+#: threshold, :data:`.loop.METRIC_DAMPING`: lam M is then a small part of the model)
+TAIL_DAMPING = 1e-3
 
 
 def secant_term(pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int
@@ -41,6 +58,32 @@ def secant_update(B: np.ndarray, step: np.ndarray, y: np.ndarray, y_sharp: np.nd
         B = B * min(1.0, abs(float(step @ y_sharp)) / abs(sBs))
     v = y_sharp - B @ step
     return B + (np.outer(v, y) + np.outer(y, v)) / ys - float(v @ step) * np.outer(y, y) / ys ** 2
+
+
+def in_tail(history: list[tuple[frozenset[int], float]]) -> bool:
+    """Whether a run is in its tail: the last :data:`TAIL_STEPS` entries of ``history``
+    (per iteration, the rows active in the first trial step's QP and that trial's damping)
+    have the same, non-empty, active rows and a damping below :data:`TAIL_DAMPING`."""
+    last = history[-TAIL_STEPS:]
+    return (len(last) == TAIL_STEPS and bool(last[0][0])
+            and all(rows == last[0][0] and lam < TAIL_DAMPING for rows, lam in last))
+
+
+def tail_term(pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], JtJ: np.ndarray
+              ) -> np.ndarray:
+    """B (n, n) such that JtJ + B is the point's J' J (n, n) updated by BFGS over each secant
+    pair (step s, y, y_sharp) in turn, oldest first, toward JtJ s + y_sharp (the structured
+    secant condition of :func:`secant_update`); a pair with s' (JtJ s + y_sharp) <= 0 (or
+    s' H s <= 0) is skipped, so JtJ + B stays positive definite where JtJ is."""
+    H = JtJ.copy()
+    for step, _, y_sharp in pairs:
+        y = JtJ @ step + y_sharp
+        Hs = H @ step
+        sy, sHs = float(step @ y), float(step @ Hs)
+        if sy <= 0 or sHs <= 0:
+            continue
+        H = H - np.outer(Hs, Hs) / sHs + np.outer(y, y) / sy
+    return H - JtJ
 
 
 class Last:
