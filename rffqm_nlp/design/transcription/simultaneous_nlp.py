@@ -131,24 +131,6 @@ def layout(N: int, M: int, tree: MeanTree, corr: Correspondence | None) -> Layou
     return Layout({**blocks, **state, **nodes, **grid, "omega": (1, 1), "rigid": (7, 1)})
 
 
-def marched_blocks(setup: Setup, tree: MeanTree) -> dict[str, np.ndarray]:
-    """The blocks of :func:`layout` at ``setup``'s start (its boundary data, omega,
-    alignment and controls), marched and folded (:class:`Projection`), by name, each
-    flat in column-major order. Raises RuntimeError when the start does not march."""
-    bd0, corr = setup.boundary, setup.correspondence
-    lay = layout(bd0.N, bd0.M, tree, corr)
-    x = ca.MX.sym("x", lay.size)
-    grid = lay.indices(*(("U", "V") if corr is not None else ()))
-    start = numpy_model.march(bd0)
-    point = Projection(x, lay.views(x), lay, start.sigma, tree, grid)(lay.pack(
-        {"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv,
-         "omega": setup.omega, "rigid": setup.rigid0(),
-         **({} if corr is None else dict(zip(("U", "V"), corr.views(setup.controls0()))))}))
-    if point is None:
-        raise RuntimeError("the start does not march with the CasADi graph")
-    return {name: point[lay.slices[name]] for name in lay.shapes}
-
-
 def pattern_blocks(N: int, M: int, tree: MeanTree) -> dict[str, tuple[int, int]]:
     """The simultaneous NLP's blocks of the crease pattern of an N x M-panel pattern: the
     vertex angles A, B, the sides LH, LV, the edge directions TH and the mean tree's nodes

@@ -18,8 +18,7 @@ from .lifting import MeanTree, sides_by_antidiagonal
 from .loss import design_residuals, state_residuals
 from .nlp import NLP, Layout, StateFunctions
 from .simultaneous_nlp import (Projection, bound_pattern, boundary_places, fold_rows, layout,
-                               marched_blocks, pattern_blocks, pattern_groups, pattern_rows,
-                               state_blocks)
+                               pattern_blocks, pattern_groups, pattern_rows, state_blocks)
 
 #: How a target lattice's indices are laid onto the pattern's (:func:`oriented`): (swap,
 #: flip_i, flip_j), the eight symmetries of the index rectangle, the identity first.
@@ -122,16 +121,16 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float],
     n_eq = g.numel() - pattern.inequalities.numel() - sum(r.numel() for r in rows)
     lbg = np.concatenate([np.zeros(n_eq), pattern.lower, *lower])
     ubg = np.concatenate([np.zeros(n_eq), pattern.upper, *upper])
-    x0 = np.zeros(lay.size)
+    project = StatesProjection(setups, lay, tree, start.sigma)
+    given = {"A": start.alpha, "B": start.beta, "LH": start.lh, "LV": start.lv}
     for k, setup in enumerate(setups):
-        blocks = marched_blocks(setup, tree)
-        mine = {n: blocks[n] for n in names[k]} | {"omega": blocks["omega"],
-                                                  "rigid": blocks["rigid"]}
-        if k == 0:
-            mine |= {n: blocks[n] for n in ("A", "B", "LH", "LV", "TH", "P")}
-        for name, value in mine.items():
-            key = name if name in lay.slices else f"{name}{k}"
-            x0[lay.slices[key]] = value
+        given |= {f"omega{k}": setup.omega, f"rigid{k}": setup.rigid0()}
+        if setup.correspondence is not None:
+            given |= dict(zip((f"U{k}", f"V{k}"),
+                              setup.correspondence.views(setup.controls0())))
+    x0 = project(lay.pack(given))
+    if x0 is None:
+        raise RuntimeError("the start does not march with the CasADi graph")
     lbx, ubx, groups = _bounds(setups, lay, x0)
     lengths = np.zeros(lay.size, dtype=bool)
     for name in lay.shapes:
@@ -154,7 +153,7 @@ def several_states(setups: Sequence[Setup], weights: Sequence[float],
                unpack=ca.Function("unpack", [x], [pattern.boundary, v["omega0"]]),
                folded=state0.folded, groups=groups, parts=parts, damping_weights=damping,
                free_target=state0.target, states=tuple(functions),
-               project=StatesProjection(setups, lay, tree, start.sigma),
+               project=project,
                design_index=design, pattern_index=lay.indices("A", "B", "LH", "LV"),
                boundary_position=position, boundary_class=klass,
                r_jacobian=GraphJacobian(residuals, x), g_jacobian=GraphJacobian(g, x))
